@@ -1,0 +1,49 @@
+"""Taichi initialisation: architecture choice, precision, threads, offline cache."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from .errors import InputError
+
+
+def _cache_dir() -> str:
+    base = os.environ.get("TAICHI_SPH_CACHE") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME", str(Path.home() / ".cache")), "taichi-sph")
+    return str(Path(base) / "ticache")
+
+
+def init(arch: str = "cpu", precision: str = "auto", threads: int | None = None, debug: bool = False) -> dict:
+    """Initialise Taichi once for this process. Returns {'arch': name, 'precision': 'f32'|'f64'}."""
+    import taichi as ti
+
+    names = {"cpu": [ti.cpu], "cuda": [ti.cuda], "vulkan": [ti.vulkan], "auto": [ti.cuda, ti.cpu]}
+    chosen = None
+    last_err = None
+    for candidate in names[arch]:
+        fp = precision
+        if fp == "auto":
+            fp = "f64" if candidate == ti.cpu else "f32"
+        kwargs = dict(arch=candidate, default_fp=ti.f64 if fp == "f64" else ti.f32, random_seed=0,
+                      offline_cache=True, offline_cache_file_path=_cache_dir(), debug=debug,
+                      log_level=os.environ.get("TI_LOG_LEVEL", "warn"))
+        if candidate == ti.cpu and threads:
+            kwargs["cpu_max_num_threads"] = int(threads)
+        try:
+            ti.init(**kwargs)
+        except Exception as exc:  # noqa: BLE001
+            last_err = exc
+            continue
+        actual = ti.lang.impl.current_cfg().arch
+        if candidate != ti.cpu and actual == ti.cpu:
+            # Taichi falls back to the CPU silently when the GPU backend is missing
+            if arch != "auto":
+                raise InputError(f"--arch {arch}: backend not available on this machine")
+            ti.reset()
+            continue
+        chosen = (actual, fp)
+        break
+    if chosen is None:
+        raise InputError(f"--arch {arch}: no usable Taichi backend ({last_err})")
+    return {"arch": str(chosen[0]).split(".")[-1], "precision": chosen[1]}

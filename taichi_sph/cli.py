@@ -1,0 +1,148 @@
+"""Command line: `taichi-sph [run] --config X.yaml [--set key=value ...] [--out RUN.h5] [--arch cpu|cuda|auto]`.
+
+Exit codes: 0 success, 2 bad input (config, file, command line; nothing written), 3 the run went
+numerically unstable (frames written so far are kept), 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+from .errors import EXIT_INPUT, InputError, InstabilityError
+
+SUBCOMMANDS = ("run", "info", "render", "plot", "sweep", "resume", "bench", "validate")
+log = logging.getLogger("taichi_sph")
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2
+        raise InputError(f"command line: {message}")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="taichi-sph", description="Particle simulation of water over and through porous ground.")
+    sub = p.add_subparsers(dest="command", parser_class=_Parser)
+
+    r = sub.add_parser("run", help="run a case (default)")
+    r.add_argument("--config", "-c", required=True, help="YAML case file")
+    r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a config entry (nested keys with dots, e.g. isph.alpha=0); repeatable")
+    r.add_argument("--variant", help="apply a named variant from the config's `variants` section")
+    r.add_argument("--out", help="run file (HDF5); default output.path of the config")
+    r.add_argument("--arch", choices=["cpu", "cuda", "vulkan", "auto"], help="Taichi backend (default: config arch)")
+    r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    r.add_argument("--quiet", "-q", action="store_true", help="warnings and errors only")
+    r.add_argument("--check", action="store_true", help="validate the config and exit")
+
+    i = sub.add_parser("info", help="what a run file holds, or what a config enables")
+    i.add_argument("run_file", nargs="?", help="run file (HDF5)")
+    i.add_argument("--config", "-c", help="YAML case file (instead of a run file)")
+    i.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    i.add_argument("--variant")
+    i.add_argument("--json", action="store_true", help="machine-readable output")
+
+    for name in ("render", "plot", "sweep", "resume", "bench", "validate"):
+        s = sub.add_parser(name, help="not available in this version")
+        s.add_argument("args", nargs=argparse.REMAINDER)
+    return p
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] not in SUBCOMMANDS and argv[0] not in ("-h", "--help"):
+        argv.insert(0, "run")
+    logging.basicConfig(level=logging.INFO, format="taichi-sph: %(message)s", stream=sys.stderr)
+    try:
+        args = _parser().parse_args(argv)
+        if args.command is None:
+            _parser().print_help()
+            return EXIT_INPUT
+        if args.command == "run":
+            return _cmd_run(args)
+        if args.command == "info":
+            return _cmd_info(args)
+        raise InputError(f"'{args.command}' is not available in this version")
+    except InputError as exc:
+        print(f"taichi-sph: error: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except InstabilityError as exc:
+        print(f"taichi-sph: unstable: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("taichi-sph: interrupted", file=sys.stderr)
+        return 130
+
+
+def _cmd_run(args) -> int:
+    from .config import load_config
+
+    if args.quiet:
+        logging.getLogger().setLevel(logging.WARNING)
+    cfg = load_config(args.config, args.overrides, args.variant)
+    out = args.out or cfg.output.path
+    _check_out_path(out, "--out" if args.out else "output.path")
+    if args.check:
+        print(f"{args.config}: valid")
+        return 0
+    from .run import run
+
+    summary = run(cfg, out_path=out, arch=args.arch, progress=False if args.no_progress else None)
+    drift = summary.get("volume_drift")
+    log.info("done: %d steps in %.1f s (%.3g M particle-steps/s)%s -> %s", summary["steps"], summary["wall_seconds"],
+             summary["mipps"], f", volume drift {drift:+.3%}" if drift is not None else "", out)
+    return 0
+
+
+def _check_out_path(out: str, key: str) -> None:
+    p = Path(out)
+    if p.is_dir():
+        raise InputError(f"{key} '{out}' is a directory; give a file name such as run.h5")
+    if p.suffix.lower() not in (".h5", ".hdf5"):
+        raise InputError(f"{key} '{out}' must end in .h5 or .hdf5")
+    parent = p.parent
+    while not parent.exists():
+        parent = parent.parent
+    if parent.exists() and not parent.is_dir():
+        raise InputError(f"{key} '{out}': '{parent}' is not a directory")
+
+
+def _cmd_info(args) -> int:
+    if args.config:
+        from .config import load_config
+        from .features import features
+
+        cfg = load_config(args.config, args.overrides, args.variant)
+        data = features(cfg)
+    elif args.run_file:
+        from .io.hdf5 import RunFile, RunFileError
+
+        try:
+            with RunFile(args.run_file) as rf:
+                data = rf.summary()
+        except RunFileError as exc:
+            raise InputError(str(exc)) from None
+    else:
+        raise InputError("info needs a run file or --config")
+    if args.json:
+        print(json.dumps(data, indent=2, default=str))
+    else:
+        _print_tree(data)
+    return 0
+
+
+def _print_tree(data, indent=0):
+    pad = "  " * indent
+    for key, val in data.items():
+        if isinstance(val, dict):
+            print(f"{pad}{key}:")
+            _print_tree(val, indent + 1)
+        else:
+            print(f"{pad}{key}: {val}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

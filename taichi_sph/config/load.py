@@ -1,0 +1,143 @@
+"""Loading a config: YAML file -> variant -> --set overrides -> schema validation -> cross checks.
+
+Every failure raises InputError with one line that names the file or the key.
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import yaml
+from pydantic import ValidationError
+
+from ..errors import InputError
+from .schema import Config, check
+
+
+def parse_overrides(items) -> list[tuple[str, object]]:
+    """Parse `key.sub=value` strings; values are YAML scalars or flow lists (`[0, 1]`)."""
+    out = []
+    for item in items or []:
+        if "=" not in item:
+            raise InputError(f"--set '{item}': expected key=value")
+        key, raw = item.split("=", 1)
+        key = key.strip()
+        if not key:
+            raise InputError(f"--set '{item}': empty key")
+        try:
+            value = yaml.safe_load(raw) if raw.strip() != "" else ""
+        except yaml.YAMLError:
+            raise InputError(f"--set '{item}': value is not valid YAML") from None
+        out.append((key, value))
+    return out
+
+
+def set_dotted(data: dict, key: str, value) -> None:
+    """Set data[a][b][c] = value for key 'a.b.c'; integer parts index lists."""
+    parts = key.split(".")
+    node = data
+    for n, part in enumerate(parts[:-1]):
+        nxt = parts[n + 1]
+        if isinstance(node, list):
+            idx = _index(node, part, key)
+            node = node[idx]
+            continue
+        if part not in node or node[part] is None:
+            node[part] = [] if nxt.isdigit() else {}
+        node = node[part]
+        if not isinstance(node, (dict, list)):
+            raise InputError(f"config key '{'.'.join(parts[:n + 1])}' is a value, not a section (in --set {key})")
+    last = parts[-1]
+    if isinstance(node, list):
+        node[_index(node, last, key)] = value
+    else:
+        node[last] = value
+
+
+def _index(node: list, part: str, key: str) -> int:
+    if not part.isdigit():
+        raise InputError(f"config key '{key}': '{part}' must be a list index")
+    idx = int(part)
+    if idx >= len(node):
+        raise InputError(f"config key '{key}': index {idx} out of range (list has {len(node)} entries)")
+    return idx
+
+
+def read_yaml(path) -> dict:
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"config file '{path}' does not exist")
+    try:
+        data = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}" if mark is not None else ""
+        raise InputError(f"config file '{path}'{where}: not valid YAML") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"config file '{path}': cannot be read ({exc.__class__.__name__})") from None
+    if not isinstance(data, dict):
+        raise InputError(f"config file '{path}': expected a mapping of keys at the top level")
+    return data
+
+
+def load_config(path=None, overrides=(), variant: str | None = None, data: dict | None = None) -> Config:
+    """Build a validated Config from a YAML file (or a dict), a variant name and `key=value` overrides."""
+    raw = copy.deepcopy(data) if data is not None else read_yaml(path)
+    if variant:
+        variants = raw.get("variants") or {}
+        if variant not in variants:
+            names = ", ".join(sorted(variants)) or "none"
+            raise InputError(f"--variant '{variant}': not defined in the config (variants: {names})")
+        for key, value in (variants[variant] or {}).items():
+            set_dotted(raw, key, value)
+        raw.setdefault("description", "")
+        raw["description"] = (raw["description"] + f" [variant {variant}]").strip()
+    for key, value in parse_overrides(overrides):
+        set_dotted(raw, key, value)
+    try:
+        cfg = Config.model_validate(raw)
+    except ValidationError as exc:
+        raise InputError(format_validation_error(exc, path)) from None
+    check(cfg)
+    return cfg
+
+
+def format_validation_error(exc: ValidationError, path=None) -> str:
+    """One line: the first problem, naming its key, with a count of the others."""
+    errors = exc.errors()
+    first = errors[0]
+    key = _loc(first.get("loc", ()))
+    kind = first.get("type", "")
+    if kind == "extra_forbidden":
+        msg = "unknown key"
+    elif kind == "missing":
+        msg = "required key is missing"
+    else:
+        msg = first.get("msg", "invalid").replace("Value error, ", "")
+        if "input" in first and kind not in ("model_type",):
+            got = first["input"]
+            text = repr(got)
+            if len(text) <= 60:
+                msg += f" (got {text})"
+    more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
+    src = f" in '{path}'" if path else ""
+    return f"config key '{key}'{src}: {msg}{more}"
+
+
+def _loc(loc) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif part in ("float", "constrained-float", "literal['auto']", "function-after[_ordered(), Box]"):
+            continue
+        else:
+            out += ("." if out else "") + str(part)
+    return out or "(top level)"
+
+
+def resolved_yaml(cfg: Config) -> str:
+    """The fully resolved config (defaults filled in) as YAML text."""
+    data = cfg.model_dump(mode="json")
+    return yaml.safe_dump(data, sort_keys=False, default_flow_style=None)

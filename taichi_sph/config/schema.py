@@ -1,0 +1,222 @@
+"""Config schema: every key a case accepts, its default, its unit and its bounds.
+
+All quantities are SI (m, s, kg, Pa). Vertical is the last axis (y in 2D, z in 3D) and gravity
+points down it unless `gravity` says otherwise. The tank interior spans [0, size] on every axis;
+walls are built outside it. Validation runs before any Taichi kernel is compiled; cross-field rules
+(list lengths equal to `dim`, blocks inside the tank, options valid for the mode) live in
+`check`. Keys are documented in docs/config.md.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal, Optional, Union
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from ..errors import InputError
+
+PosFloat = Annotated[float, Field(gt=0)]
+NonNegFloat = Annotated[float, Field(ge=0)]
+PosInt = Annotated[int, Field(gt=0)]
+
+
+class Strict(BaseModel):
+    """Base: unknown keys are errors, no silent coercion of strings to numbers."""
+
+    model_config = ConfigDict(extra="forbid", strict=False, validate_default=True)
+
+
+class Box(Strict):
+    """Axis-aligned box [min, max] (m)."""
+
+    min: list[float]
+    max: list[float]
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        if len(self.min) != len(self.max):
+            raise ValueError("min and max must have the same length")
+        for a, b in zip(self.min, self.max):
+            if not b > a:
+                raise ValueError(f"max must exceed min on every axis (min={self.min}, max={self.max})")
+        return self
+
+
+class Output(Strict):
+    path: str = "out/run.h5"
+    #: simulated seconds between frames
+    every: PosFloat = 0.02
+    #: HDF5 compression of frame datasets
+    compression: Literal["none", "gzip", "lzf"] = "none"
+
+
+class Fluid(Strict):
+    #: water density rho_w (kg/m^3)
+    density: PosFloat = 1000.0
+    #: kinematic viscosity nu_w (m^2/s)
+    viscosity: NonNegFloat = 1.0e-6
+    #: sub-particle turbulence: Smagorinsky eddy viscosity nu_T = (Cs Delta)^2 |S| (seed 000 eq 3)
+    turbulence: Literal["none", "smagorinsky"] = "none"
+    smagorinsky_cs: PosFloat = 0.2
+
+
+class Tank(Strict):
+    #: interior extent (m) along each axis, from the origin
+    size: list[PosFloat]
+    #: layers of wall particles; default fills the kernel support (ceil(2.4) = 3)
+    wall_layers: Optional[PosInt] = None
+    #: velocity condition at walls
+    boundary: Literal["no_slip", "slip"] = "no_slip"
+    #: no lid: the top is open
+    open_top: bool = True
+    #: axes (0-based) whose two side walls are left out and replaced by periodic wrap
+    #: (reserved; not implemented yet: must be empty)
+    periodic: list[int] = []
+
+
+class Obstacle(Box):
+    """A solid block of wall particles inside the tank (m)."""
+
+
+class PPESolver(Strict):
+    #: sparse_cg: matrix assembled with ti.linalg.SparseMatrixBuilder, solved by SparseCG
+    type: Literal["sparse_cg"] = "sparse_cg"
+    #: relative residual |b - A p| / |b| to reach
+    tolerance: PosFloat = 1.0e-8
+    max_iterations: PosInt = 2000
+    #: what to do when CG stops before the tolerance: stop the run, or record and go on
+    on_failure: Literal["error", "warn"] = "error"
+
+
+class ISPH(Strict):
+    #: density-invariance stabilisation alpha of eq 30-31 (0 = divergence-free only)
+    alpha: NonNegFloat = 0.01
+    #: free-surface threshold N_surf of eq 34 (default: 48 in 3D as the seed, 17 in 2D)
+    n_surf: Optional[PosInt] = None
+    #: Dirichlet value at free-surface particles: zero (seed) or the hydrostatic pressure at the
+    #: centre of a surface particle, rho_w |g| dx / 2 (the particle's top is the surface)
+    free_surface_pressure: Literal["half_layer", "zero"] = "half_layer"
+    #: pressure gradient: eq 12 difference form with kernel-gradient correction (default),
+    #: plain eq 12, or the symmetric eq 13 form
+    gradient: Literal["corrected", "difference", "symmetric"] = "corrected"
+    ppe: PPESolver = PPESolver()
+
+
+class TimeStep(Strict):
+    """Limits used when dt = auto: dt = min(cfl dx / u_max, viscous dx^2 / nu, force sqrt(dx / |g|))."""
+
+    cfl: PosFloat = 0.25
+    viscous: PosFloat = 0.125
+    force: PosFloat = 0.25
+    #: assumed speed (m/s) before the flow starts, e.g. sqrt(2 g H) for a collapse
+    initial_speed: Optional[PosFloat] = None
+    max: PosFloat = 0.005
+    min: PosFloat = 1.0e-7
+
+
+class Neighbours(Strict):
+    #: neighbour-list capacity per particle; default 64 (2D) or 160 (3D). Overflow is an error.
+    max: Optional[PosInt] = None
+
+
+class Guard(Strict):
+    """Stability checks made every step."""
+
+    #: stop when any speed exceeds this (m/s); default 20 sqrt(g H_domain)
+    max_speed: Optional[PosFloat] = None
+    #: particles leaving the domain: remove with a warning and count, or stop the run
+    out_of_domain: Literal["remove", "error"] = "remove"
+
+
+class Config(Strict):
+    mode: Literal["isph", "wcsph_biot"] = "isph"
+    dim: Literal[2, 3] = 2
+    #: initial particle spacing (m)
+    dx: PosFloat
+    #: simulated time (s)
+    end_time: PosFloat
+    #: time step (s) or auto (CFL-adaptive, see `timestep`)
+    dt: Union[PosFloat, Literal["auto"]] = 0.001
+    #: Taichi backend
+    arch: Literal["cpu", "cuda", "vulkan", "auto"] = "cpu"
+    #: floating-point precision of fields (auto: f64 on CPU, f32 on GPUs)
+    precision: Literal["auto", "f32", "f64"] = "auto"
+    #: CPU threads (default: all cores)
+    threads: Optional[PosInt] = None
+    #: gravity vector (m/s^2); default -9.81 along the last axis
+    gravity: Optional[list[float]] = None
+    description: str = ""
+    output: Output = Output()
+    fluid: Fluid = Fluid()
+    tank: Tank
+    #: water blocks (m), each filled with particles on a lattice of spacing dx
+    water: list[Box] = Field(min_length=1)
+    obstacles: list[Obstacle] = []
+    isph: ISPH = ISPH()
+    timestep: TimeStep = TimeStep()
+    neighbours: Neighbours = Neighbours()
+    guard: Guard = Guard()
+    #: named sets of dotted overrides applied by `--variant NAME`
+    variants: dict[str, dict[str, object]] = {}
+
+    # ---- derived values -------------------------------------------------------------------
+    def gravity_vector(self) -> list[float]:
+        if self.gravity is not None:
+            return list(self.gravity)
+        g = [0.0] * self.dim
+        g[-1] = -9.81
+        return g
+
+    def wall_layers(self) -> int:
+        return self.tank.wall_layers or 3
+
+    def n_surf(self) -> int:
+        if self.isph.n_surf is not None:
+            return self.isph.n_surf
+        return 48 if self.dim == 3 else 17
+
+    def max_neighbours(self) -> int:
+        if self.neighbours.max is not None:
+            return self.neighbours.max
+        return 160 if self.dim == 3 else 64
+
+
+def check(cfg: "Config") -> None:
+    """Cross-field rules; raises InputError naming the key."""
+    d = cfg.dim
+    _need_len(cfg.tank.size, d, "tank.size")
+    if cfg.gravity is not None:
+        _need_len(cfg.gravity, d, "gravity")
+    for group in ("water", "obstacles"):
+        for k, box in enumerate(getattr(cfg, group)):
+            _need_len(box.min, d, f"{group}[{k}].min")
+            _need_len(box.max, d, f"{group}[{k}].max")
+            _inside(box, cfg.tank.size, f"{group}[{k}]")
+    if cfg.tank.periodic:
+        _fail("tank.periodic", "periodic boundaries are not implemented yet; use slip walls")
+    if min(cfg.tank.size) < 2 * cfg.dx:
+        _fail("tank.size", f"every side must hold at least 2 particles of dx = {cfg.dx}")
+    if cfg.mode == "wcsph_biot":
+        _fail("mode", "wcsph_biot is not available in this version; use isph")
+    if isinstance(cfg.dt, float) and cfg.output.every < cfg.dt:
+        _fail("output.every", f"must be at least dt = {cfg.dt}")
+    if isinstance(cfg.dt, float) and cfg.dt >= cfg.end_time:
+        _fail("dt", f"must be smaller than end_time = {cfg.end_time}")
+    if cfg.timestep.min > cfg.timestep.max:
+        _fail("timestep.min", "must not exceed timestep.max")
+
+
+def _fail(key: str, message: str):
+    raise InputError(f"config key '{key}': {message}")
+
+
+def _need_len(values, n, key):
+    if len(values) != n:
+        _fail(key, f"needs {n} values for dim = {n}, got {len(values)}")
+
+
+def _inside(box: Box, size, key):
+    tol = 1e-12
+    for ax, (a, b, s) in enumerate(zip(box.min, box.max, size)):
+        if a < -tol or b > s + tol:
+            _fail(key, f"lies outside the tank interior [0, {s}] on axis {ax} (min={box.min}, max={box.max})")

@@ -1,0 +1,32 @@
+"""Which physics and options a config enables (what `taichi-sph info --config` prints)."""
+
+from __future__ import annotations
+
+
+def features(cfg) -> dict:
+    """A JSON-serialisable description of the physics a validated config compiles and runs."""
+    return {
+        "mode": cfg.mode,
+        "dim": cfg.dim,
+        "dx": cfg.dx,
+        "dt": cfg.dt,
+        "end_time": cfg.end_time,
+        "physics": {
+            "viscosity": cfg.fluid.viscosity > 0,
+            "turbulence": cfg.fluid.turbulence,
+            "porous_ground": False,
+            "walls": cfg.tank.boundary,
+            "obstacles": len(cfg.obstacles),
+            "gravity": cfg.gravity_vector(),
+        },
+        "isph": {
+            "alpha": cfg.isph.alpha,
+            "n_surf": cfg.n_surf(),
+            "free_surface_pressure": cfg.isph.free_surface_pressure,
+            "gradient": cfg.isph.gradient,
+            "ppe_solver": cfg.isph.ppe.type,
+            "ppe_tolerance": cfg.isph.ppe.tolerance,
+            "ppe_max_iterations": cfg.isph.ppe.max_iterations,
+        },
+        "output": {"path": cfg.output.path, "every": cfg.output.every},
+    }

@@ -1,0 +1,494 @@
+"""Stabilized ISPH step (seed 000 section 3) on the unified Navier-Stokes / extended Darcy form.
+
+One step (projection method, eqs 18-31), all particles water or wall:
+1. neighbour search (cell-sorted grid, lists for water particles); number density
+   <rho_i> = sum_j m_j W_ij (eq 27, walls counted with a water particle's mass, lattice-normalised);
+   free surface N_i < eps_i N_surf (eq 34); kernel-gradient correction matrix L_i.
+2. predictor (eq 19): v* = v + c (g/eps + nu_E lap v) with c = eps dt / Cr, the viscous term by the
+   variable-viscosity Laplacian eq 22 (Smagorinsky nu_T of eq 3 only when enabled).
+3. PPE (eq 31) in symmetric form  div(k grad P)_i = div v*_i + alpha eps_i (rho_bar_i - <rho_i>) /
+   (rho_bar_i dt), k = c / rho_bar (eq 24 Laplacian with the pairwise mean of rho_bar k). With
+   eps = 1 and k = dt / rho_w this is eq 31 divided by rho_w / dt. Free-surface rows are Dirichlet.
+   Walls: a wall particle seen from i carries P_i + rho_w g . (x_w - x_i) (Neumann with hydrostatic
+   correction), so walls add only known terms and the matrix stays symmetric positive definite.
+4. corrector (eq 20): v = v* - k grad P, gradient eq 12 with kernel-gradient correction by default.
+5. advection x += dt v / eps (pore velocity) or dt v (Darcy velocity, `advection: darcy`).
+"""
+
+
+import logging
+import math
+import time as _time
+
+import numpy as np
+import taichi as ti
+
+from ..errors import InstabilityError
+from ..linalg.sparse_cg import SparseCGSolver
+from ..scene import WALL, WATER
+from ..sph import kernels
+from ..sph.grid import NeighbourGrid, NeighbourOverflowError
+from . import terms
+
+log = logging.getLogger("taichi_sph")
+
+GRAD_CORRECTED, GRAD_DIFFERENCE, GRAD_SYMMETRIC = 0, 1, 2
+_GRAD = {"corrected": GRAD_CORRECTED, "difference": GRAD_DIFFERENCE, "symmetric": GRAD_SYMMETRIC}
+
+
+@ti.data_oriented
+class ISPHSolver:
+    """State and step of mode `isph`. Built from a validated Config and a Scene."""
+
+    def __init__(self, cfg, scene):
+        self.cfg = cfg
+        self.dim = dim = cfg.dim
+        self.dx = dx = cfg.dx
+        self.re = kernels.SUPPORT_FACTOR * dx
+        self.h = 0.5 * self.re
+        self.eta2 = 1.0e-4 * self.h**2
+        self.rho_w = cfg.fluid.density
+        self.nu = cfg.fluid.viscosity
+        self.cs_delta2 = (cfg.fluid.smagorinsky_cs * self.re) ** 2
+        self.mass = self.rho_w * dx**dim
+        lat = kernels.lattice_sums(dim)
+        self.kernel_sum = lat["kernel_sum"]
+        self.g_np = np.asarray(cfg.gravity_vector(), dtype=float)
+        self.g_abs = float(np.linalg.norm(self.g_np))
+        self.alpha = cfg.isph.alpha
+        self.n_surf = cfg.n_surf()
+        self.p_surface = 0.5 * self.rho_w * self.g_abs * dx if cfg.isph.free_surface_pressure == "half_layer" else 0.0
+        # ti.static switches: a scene compiles only what it uses
+        self.turbulence = cfg.fluid.turbulence == "smagorinsky"
+        self.no_slip = cfg.tank.boundary == "no_slip"
+        self.grad_mode = _GRAD[cfg.isph.gradient]
+        self.pore_advection = True
+
+        self.n = scene.n
+        self.n_water = scene.count(WATER)
+        n = self.n
+        self.max_nb = cfg.max_neighbours()
+        vec = ti.types.vector(dim, float)
+        self.x = ti.Vector.field(dim, float, n)
+        self.v = ti.Vector.field(dim, float, n)
+        self.vstar = ti.Vector.field(dim, float, n)
+        self.normal = ti.Vector.field(dim, float, n)
+        self.p = ti.field(float, n)
+        self.rho_n = ti.field(float, n)
+        self.eps = ti.field(float, n)
+        self.kcoef = ti.field(float, n)
+        self.nu_t = ti.field(float, n)
+        self.L = ti.Matrix.field(dim, dim, float, n)
+        self.kind = ti.field(ti.i32, n)
+        self.ids = ti.field(ti.i32, n)
+        self.active = ti.field(ti.i32, n)
+        self.free = ti.field(ti.i32, n)
+        self.solve_mask = ti.field(ti.i32, n)
+        self.row = ti.field(ti.i32, n)
+        self.b = ti.field(float, max(self.n_water, 1))
+        self.psol = ti.field(float, max(self.n_water, 1))
+        self.triplets = ti.field(ti.i32, ())
+        self.dt = ti.field(float, ())
+        self.g = vec(self.g_np.tolist())
+        self._vec = vec
+        self.particle_fields = [self.x, self.v, self.normal, self.p, self.eps, self.kind, self.ids, self.active]
+
+        self.np_fp = np.float64 if _is_f64() else np.float32
+        self.x.from_numpy(scene.position.astype(self.np_fp))
+        self.normal.from_numpy(scene.normal.astype(self.np_fp))
+        self.kind.from_numpy(scene.kind.astype(np.int32))
+        self.ids.from_numpy(scene.ids)
+        self.active.fill(1)
+        self.eps.fill(1.0)
+        self.v.fill(0.0)
+        self.p.fill(0.0)
+
+        self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.re, self.max_nb)
+        fp = ti.f64 if _is_f64() else ti.f32
+        self.ppe = SparseCGSolver(max(self.n_water, 1), max(self.n_water, 1) * (self.max_nb + 1), fp,
+                                  cfg.isph.ppe.tolerance, cfg.isph.ppe.max_iterations)
+        self.dirichlet_scale = self._lattice_laplacian_sum()
+        self.removed_total = 0
+        self.step_count = 0
+        self.time = 0.0
+        self.timers = {k: 0.0 for k in ("neighbours", "density", "predictor", "ppe_assembly", "ppe_solve",
+                                         "corrector", "diagnostics")}
+        self.last = {}
+
+    # ------------------------------------------------------------------ helpers
+    def _lattice_laplacian_sum(self) -> float:
+        """sum_j V_j |F_ij| over a full lattice: a typical PPE diagonal per unit k (scales Dirichlet rows)."""
+        d, h, dx = self.dim, self.h, self.dx
+        m = int(math.ceil(kernels.SUPPORT_FACTOR)) + 1
+        rng = np.arange(-m, m + 1) * dx
+        pts = np.stack([g.ravel() for g in np.meshgrid(*([rng] * d), indexing="ij")], axis=1)
+        r = np.linalg.norm(pts, axis=1)
+        r = r[(r > 0) & (r < self.re)]
+        f = -kernels.dw_dr_np(r, h, d) * r / (r * r + self.eta2)
+        return float(2.0 * dx**d * f.sum())
+
+    # ------------------------------------------------------------------ kernels
+    @ti.kernel
+    def _k_rows(self):
+        """Row numbering of the PPE (water particles in current order) and the neighbour-list mask."""
+        ti.loop_config(serialize=True)
+        c = 0
+        for i in range(self.n):
+            self.row[i] = -1
+            self.solve_mask[i] = 0
+            if self.kind[i] == WATER:
+                self.row[i] = c
+                c += 1
+                if self.active[i] == 1:
+                    self.solve_mask[i] = 1
+
+    @ti.kernel
+    def _k_density(self):
+        """<rho_i> (eq 27), free-surface flag (eq 34) and the kernel-gradient correction L_i."""
+        for i in range(self.n):
+            if self.solve_mask[i] == 1:
+                xi = self.x[i]
+                wsum = kernels.w(0.0, self.h, self.dim)
+                M = ti.Matrix.zero(float, self.dim, self.dim)
+                n_water = 0
+                nb = self.grid.nbr_count[i]
+                for k in range(nb):
+                    j = self.grid.nbr[i, k]
+                    rij = xi - self.x[j]
+                    r = rij.norm()
+                    wsum += kernels.w(r, self.h, self.dim)
+                    vj = self.mass / (self.eps[i] * self.rho_w)
+                    if self.kind[j] == WATER:
+                        n_water += 1
+                        vj = self.mass / (self.eps[j] * self.rho_w)
+                    if r > 0.0:
+                        M += vj * (-rij).outer_product(kernels.grad_w(rij, r, self.h, self.dim))
+                self.rho_n[i] = self.mass * wsum / self.kernel_sum
+                is_free = 0
+                if nb < self.eps[i] * self.n_surf or n_water == 0:
+                    is_free = 1
+                self.free[i] = is_free
+                Li = ti.Matrix.identity(float, self.dim)
+                if ti.static(self.grad_mode == GRAD_CORRECTED):
+                    det = M.determinant()
+                    if det > 0.1:
+                        Li = M.inverse()
+                self.L[i] = Li
+
+    @ti.kernel
+    def _k_eddy_viscosity(self):
+        """Smagorinsky eddy viscosity nu_T = (Cs Delta)^2 |S| (eq 3), S from a corrected eq 12 gradient."""
+        for i in range(self.n):
+            if self.solve_mask[i] == 1:
+                xi = self.x[i]
+                vi = self.v[i]
+                G = ti.Matrix.zero(float, self.dim, self.dim)
+                for k in range(self.grid.nbr_count[i]):
+                    j = self.grid.nbr[i, k]
+                    rij = xi - self.x[j]
+                    r = rij.norm()
+                    vj = self.v[j]
+                    vol = self.mass / (self.eps[i] * self.rho_w)
+                    if self.kind[j] == WALL:
+                        vj = terms.mirror_velocity(vi, self.normal[j], self.no_slip)
+                    else:
+                        vol = self.mass / (self.eps[j] * self.rho_w)
+                    if r > 0.0:
+                        G += vol * (vj - vi).outer_product(kernels.grad_w(rij, r, self.h, self.dim))
+                G = G @ self.L[i].transpose()
+                S = 0.5 * (G + G.transpose())
+                s2 = 0.0
+                for a, c in ti.static(ti.ndrange(self.dim, self.dim)):
+                    s2 += S[a, c] * S[a, c]
+                self.nu_t[i] = self.cs_delta2 * ti.sqrt(2.0 * s2)
+
+    @ti.kernel
+    def _k_predictor(self):
+        """v* = v + c (g/eps + nu_E lap v) (eq 19) with eq 22; k = c / rho_bar for the PPE."""
+        dt = self.dt[None]
+        for i in range(self.n):
+            if self.solve_mask[i] == 1:
+                xi = self.x[i]
+                vi = self.v[i]
+                eps_i = self.eps[i]
+                rb_i = eps_i * self.rho_w
+                nu_i = self.nu / eps_i
+                if ti.static(self.turbulence):
+                    nu_i += self.nu_t[i] / eps_i
+                lap = ti.Vector.zero(float, self.dim)
+                for k in range(self.grid.nbr_count[i]):
+                    j = self.grid.nbr[i, k]
+                    rij = xi - self.x[j]
+                    r = rij.norm()
+                    if r > 0.0:
+                        f = terms.laplacian_weight(rij, r, self.h, self.eta2, self.dim)
+                        vj = self.v[j]
+                        rb_j = rb_i
+                        nu_j = nu_i
+                        if self.kind[j] == WALL:
+                            vj = terms.mirror_velocity(vi, self.normal[j], self.no_slip)
+                        else:
+                            rb_j = self.eps[j] * self.rho_w
+                            nu_j = self.nu / self.eps[j]
+                            if ti.static(self.turbulence):
+                                nu_j += self.nu_t[j] / self.eps[j]
+                        lap += terms.variable_laplacian_pair(self.mass, rb_i, nu_i, rb_j, nu_j, f) * (vi - vj)
+                c = eps_i * dt
+                self.vstar[i] = vi + c * (self.g / eps_i + lap)
+                self.kcoef[i] = c / rb_i
+
+    @ti.kernel
+    def _k_assemble(self, A: ti.types.sparse_matrix_builder()):
+        """PPE rows (eq 31 in symmetric form, eq 23 divergence, eq 24 Laplacian); Dirichlet rows at the
+        free surface (eq 34) and for inactive particles."""
+        dt = self.dt[None]
+        dirichlet_diag = self.dirichlet_scale * dt / self.rho_w
+        self.triplets[None] = 0
+        for i in range(self.n):
+            if self.kind[i] == WATER:
+                ri = self.row[i]
+                if self.solve_mask[i] == 1 and self.free[i] == 0:
+                    xi = self.x[i]
+                    vi = self.vstar[i]
+                    eps_i = self.eps[i]
+                    rb_i = eps_i * self.rho_w
+                    k_i = self.kcoef[i]
+                    div = 0.0
+                    diag = 0.0
+                    rhs = 0.0
+                    for k in range(self.grid.nbr_count[i]):
+                        j = self.grid.nbr[i, k]
+                        rij = xi - self.x[j]
+                        r = rij.norm()
+                        if r > 0.0:
+                            gw = kernels.grad_w(rij, r, self.h, self.dim)
+                            f = terms.laplacian_weight(rij, r, self.h, self.eta2, self.dim)
+                            if self.kind[j] == WALL:
+                                vj = terms.mirror_velocity(vi, self.normal[j], self.no_slip)
+                                div += self.mass * (vj - vi).dot(gw)
+                                K = -terms.variable_laplacian_pair(self.mass, rb_i, k_i, rb_i, k_i, f)
+                                rhs += K * self.rho_w * self.g.dot(self.x[j] - xi)
+                            else:
+                                div += self.mass * (self.vstar[j] - vi).dot(gw)
+                                rb_j = self.eps[j] * self.rho_w
+                                K = -terms.variable_laplacian_pair(self.mass, rb_i, k_i, rb_j, self.kcoef[j], f)
+                                diag += K
+                                if self.free[j] == 1 or self.solve_mask[j] == 0:
+                                    rhs += K * self._dirichlet_value(j)
+                                else:
+                                    A[ri, self.row[j]] += -K
+                                    ti.atomic_add(self.triplets[None], 1)
+                    div /= rb_i
+                    source = div + self.alpha * eps_i * (rb_i - self.rho_n[i]) / (rb_i * dt)
+                    A[ri, ri] += diag
+                    ti.atomic_add(self.triplets[None], 1)
+                    self.b[ri] = rhs - source
+                else:
+                    A[ri, ri] += dirichlet_diag
+                    ti.atomic_add(self.triplets[None], 1)
+                    self.b[ri] = dirichlet_diag * self._dirichlet_value(i)
+
+    @ti.func
+    def _dirichlet_value(self, i):
+        val = 0.0
+        if self.solve_mask[i] == 1:
+            val = self.p_surface
+        return val
+
+    @ti.kernel
+    def _k_scatter_pressure(self):
+        for i in range(self.n):
+            if self.kind[i] == WATER:
+                self.p[i] = self.psol[self.row[i]]
+
+    @ti.kernel
+    def _k_gather_pressure(self):
+        for i in range(self.n):
+            if self.kind[i] == WATER:
+                self.psol[self.row[i]] = self.p[i]
+
+    @ti.kernel
+    def _k_corrector(self):
+        """v = v* - k grad P (eq 20), gradient by eq 12 (optionally corrected) or eq 13."""
+        for i in range(self.n):
+            if self.solve_mask[i] == 1:
+                xi = self.x[i]
+                pi = self.p[i]
+                rb_i = self.eps[i] * self.rho_w
+                gp = ti.Vector.zero(float, self.dim)
+                for k in range(self.grid.nbr_count[i]):
+                    j = self.grid.nbr[i, k]
+                    rij = xi - self.x[j]
+                    r = rij.norm()
+                    if r > 0.0:
+                        gw = kernels.grad_w(rij, r, self.h, self.dim)
+                        pj = self.p[j]
+                        rb_j = rb_i
+                        if self.kind[j] == WALL:
+                            pj = terms.wall_pressure(pi, self.rho_w, self.g, self.x[j], xi)
+                        else:
+                            rb_j = self.eps[j] * self.rho_w
+                        if ti.static(self.grad_mode == GRAD_SYMMETRIC):
+                            gp += self.mass * (pj / (rb_j * rb_j) + pi / (rb_i * rb_i)) * gw
+                        else:
+                            gp += self.mass / rb_j * (pj - pi) * gw
+                if ti.static(self.grad_mode == GRAD_SYMMETRIC):
+                    gp *= rb_i
+                if ti.static(self.grad_mode == GRAD_CORRECTED):
+                    gp = self.L[i] @ gp
+                self.v[i] = self.vstar[i] - self.kcoef[i] * gp
+
+    @ti.kernel
+    def _k_advect(self):
+        for i in range(self.n):
+            if self.solve_mask[i] == 1:
+                dt = self.dt[None]
+                u = self.v[i]
+                if ti.static(self.pore_advection):
+                    u = u / self.eps[i]
+                self.x[i] += dt * u
+
+    @ti.kernel
+    def _k_diagnostics(self) -> ti.types.vector(6, float):
+        """Kinetic energy, max speed, water volume, count of non-finite values, first bad particle id,
+        number of free-surface particles."""
+        ke = 0.0
+        vmax = 0.0
+        vol = 0.0
+        bad = 0.0
+        first_bad = 2.0e9
+        nfree = 0.0
+        for i in range(self.n):
+            if self.solve_mask[i] == 1:
+                dt = self.dt[None]
+                u = self.v[i] / self.eps[i]
+                s2 = u.dot(u)
+                ke += 0.5 * self.mass * s2
+                ti.atomic_max(vmax, ti.sqrt(s2))
+                if self.free[i] == 1:
+                    vol += self.mass / self.rho_w
+                    nfree += 1.0
+                else:
+                    vol += self.mass * self.eps[i] / self.rho_n[i]
+                val = s2 + self.p[i] + self.x[i].sum()
+                if ti.math.isnan(val) or ti.math.isinf(val):
+                    bad += 1.0
+                    ti.atomic_min(first_bad, float(self.ids[i]))
+        return ti.Vector([ke, vmax, vol, bad, first_bad, nfree])
+
+    # ------------------------------------------------------------------ step
+    def _tick(self, key, t0):
+        t1 = _time.perf_counter()
+        self.timers[key] += t1 - t0
+        return t1
+
+    def neighbour_search(self):
+        removed = self.grid.sort(self.x, self.active, self.n)
+        if len(removed):
+            ids = self.ids.to_numpy()[removed]
+            self.removed_total += len(removed)
+            if self.cfg.guard.out_of_domain == "error":
+                raise InstabilityError(
+                    f"step {self.step_count}, t = {self.time:.6g} s: {len(removed)} particle(s) left the domain "
+                    f"(ids {_ids_text(ids)})", step=self.step_count, time=self.time, quantity="position",
+                    particles=ids)
+            log.warning("step %d, t = %.6g s: removed %d particle(s) that left the domain (ids %s); %d removed so far",
+                        self.step_count, self.time, len(removed), _ids_text(ids), self.removed_total)
+        for f in self.particle_fields:
+            self.grid.reorder(f, self.n)
+        self._k_rows()
+        try:
+            self.grid.build_neighbour_lists(self.x, self.solve_mask, self.n, self.re, self.ids)
+        except NeighbourOverflowError as exc:
+            raise InstabilityError(f"step {self.step_count}, t = {self.time:.6g} s: {exc}", step=self.step_count,
+                                   time=self.time, quantity="neighbour count",
+                                   particles=[exc.particle_id]) from None
+
+    def step(self, dt: float) -> dict:
+        t0 = _time.perf_counter()
+        self.neighbour_search()
+        t0 = self._tick("neighbours", t0)
+        self._k_density()
+        t0 = self._tick("density", t0)
+        if self.turbulence:
+            self._k_eddy_viscosity()
+        self.dt[None] = dt
+        self._k_predictor()
+        t0 = self._tick("predictor", t0)
+        self._k_assemble(self.ppe.builder)
+        self.ppe.check_triplets(int(self.triplets[None]))
+        self.ppe.build()
+        self._k_gather_pressure()
+        b = self.b.to_numpy()[: self.n_water]
+        x0 = self.psol.to_numpy()[: self.n_water]
+        t0 = self._tick("ppe_assembly", t0)
+        sol, iters, res, ok = self.ppe.solve(b, x0)
+        t0 = self._tick("ppe_solve", t0)
+        if not ok:
+            msg = (f"step {self.step_count + 1}, t = {self.time + dt:.6g} s: PPE solver did not converge "
+                   f"({iters} iterations, relative residual {res:.3g} > {self.ppe.tolerance:g})")
+            if self.cfg.isph.ppe.on_failure == "error" or not np.isfinite(res):
+                raise InstabilityError(msg, step=self.step_count + 1, time=self.time + dt, quantity="PPE residual")
+            log.warning(msg)
+        self.psol.from_numpy(sol.astype(self.np_fp))
+        self._k_scatter_pressure()
+        self._k_corrector()
+        self._k_advect()
+        t0 = self._tick("corrector", t0)
+        self.step_count += 1
+        self.time += dt
+        d = self._k_diagnostics().to_numpy()
+        self._tick("diagnostics", t0)
+        self.last = {"kinetic_energy": float(d[0]), "max_speed": float(d[1]), "water_volume": float(d[2]),
+                     "cg_iterations": iters, "cg_residual": res, "free_surface": int(d[5])}
+        if d[3] > 0:
+            raise InstabilityError(
+                f"step {self.step_count}, t = {self.time:.6g} s: non-finite position, velocity or pressure at "
+                f"{int(d[3])} particle(s) (first id {int(d[4])})", step=self.step_count, time=self.time,
+                quantity="non-finite state", particles=[int(d[4])])
+        return self.last
+
+    def initial_diagnostics(self) -> dict:
+        """Neighbour search and density at t = 0 (for the first frame and the reference volume)."""
+        self.neighbour_search()
+        self._k_density()
+        d = self._k_diagnostics().to_numpy()
+        self.last = {"kinetic_energy": float(d[0]), "max_speed": float(d[1]), "water_volume": float(d[2]),
+                     "cg_iterations": 0, "cg_residual": 0.0, "free_surface": int(d[5])}
+        return self.last
+
+    # ------------------------------------------------------------------ output
+    def fields_by_id(self) -> dict:
+        """Per-particle arrays in id order (SPEC 8 frame fields)."""
+        n = self.n
+        ids = self.ids.to_numpy()[:n]
+        order = np.empty(n, dtype=np.int64)
+        order[ids] = np.arange(n)
+        kind = self.kind.to_numpy()[:n][order]
+        rho = self.rho_n.to_numpy()[:n][order]
+        rho = np.where(kind == WATER, rho, self.rho_w)
+        return {
+            "position": self.x.to_numpy()[:n][order],
+            "velocity": self.v.to_numpy()[:n][order],
+            "pressure": self.p.to_numpy()[:n][order],
+            "density": rho,
+            "active": self.active.to_numpy()[:n][order].astype(bool),
+        }
+
+    def max_speed_bound(self) -> float:
+        if self.cfg.guard.max_speed is not None:
+            return self.cfg.guard.max_speed
+        height = float(self.cfg.tank.size[-1])
+        return 20.0 * math.sqrt(self.g_abs * height) if self.g_abs > 0 else 100.0
+
+
+def _ids_text(ids, limit=10) -> str:
+    ids = [int(i) for i in ids]
+    text = ", ".join(str(i) for i in ids[:limit])
+    return text + (f", ... ({len(ids)} in all)" if len(ids) > limit else "")
+
+
+def _is_f64() -> bool:
+    from taichi.lang import impl
+
+    return impl.get_runtime().default_fp == ti.f64

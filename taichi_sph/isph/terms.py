@@ -1,0 +1,40 @@
+"""Physics terms of the stabilized ISPH scheme (seed 000), each a small ti.func citing its equation.
+
+Notation: i the particle, j a neighbour, rij = x_i - x_j, F_ij = rij . grad W_ij / (r^2 + eta^2)
+(< 0), V_j = m_j / rho_bar_j, rho_bar = eps rho_w (eq 33).
+"""
+
+import taichi as ti
+
+from ..sph import kernels
+
+
+@ti.func
+def laplacian_weight(rij, r, h, eta2, dim: ti.template()):
+    """F_ij = rij . grad W_ij / (r^2 + eta^2), the pair factor of eq 14, 22 and 24."""
+    return kernels.dw_dr(r, h, dim) * r / (r * r + eta2)
+
+
+@ti.func
+def variable_laplacian_pair(m_j, rb_i, q_i, rb_j, q_j, f_ij):
+    """Pair coefficient of the variable-coefficient Laplacian eq 22 / eq 24:
+    m_j (rho_bar_i q_i + rho_bar_j q_j) / (rho_bar_i rho_bar_j) F_ij, so that
+    div(q grad phi)_i = sum_j coef_ij (phi_i - phi_j)."""
+    return m_j * (rb_i * q_i + rb_j * q_j) / (rb_i * rb_j) * f_ij
+
+
+@ti.func
+def mirror_velocity(v_i, n_w, no_slip: ti.template()):
+    """Velocity a wall particle takes as seen from fluid particle i (virtual-marker idea of the seed,
+    evaluated at i itself): no-slip reverses the whole velocity, slip only its normal component."""
+    out = -v_i
+    if ti.static(not no_slip):
+        out = v_i - 2.0 * v_i.dot(n_w) * n_w
+    return out
+
+
+@ti.func
+def wall_pressure(p_i, rho_w, g, x_w, x_i):
+    """Wall pressure seen from fluid particle i: Neumann condition with hydrostatic correction,
+    P_w = P_i + rho_w g . (x_w - x_i)."""
+    return p_i + rho_w * g.dot(x_w - x_i)

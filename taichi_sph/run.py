@@ -1,0 +1,203 @@
+"""Driver: config -> scene -> solver -> step loop -> run file. Data flows one way."""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import subprocess
+import sys
+import time as _time
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .config import resolved_yaml
+from .errors import InstabilityError
+from .scene import build_scene, describe
+
+log = logging.getLogger("taichi_sph")
+
+DT_FIXED, DT_CFL, DT_VISCOUS, DT_FORCE, DT_MAX, DT_OUTPUT = range(6)
+DT_LIMIT_NAMES = {DT_FIXED: "fixed", DT_CFL: "cfl", DT_VISCOUS: "viscous", DT_FORCE: "force", DT_MAX: "max",
+                  DT_OUTPUT: "output"}
+DIAG_COLUMNS = ("time", "dt", "kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
+                "wall_seconds", "dt_limit", "free_surface")
+
+
+def code_version() -> str:
+    root = Path(__file__).resolve().parents[1]
+    try:
+        rev = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True,
+                             text=True, timeout=5)
+        if rev.returncode == 0 and rev.stdout.strip():
+            return f"{__version__}+g{rev.stdout.strip()}"
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return __version__
+
+
+class TimeStepper:
+    """Fixed dt, or dt = min(cfl dx/u, viscous dx^2/nu, force sqrt(dx/|g|), max); reports the binding limit."""
+
+    def __init__(self, cfg, g_abs: float):
+        self.cfg = cfg
+        self.fixed = None if cfg.dt == "auto" else float(cfg.dt)
+        self.g_abs = g_abs
+
+    def choose(self, max_speed: float) -> tuple[float, int]:
+        if self.fixed is not None:
+            return self.fixed, DT_FIXED
+        ts, dx = self.cfg.timestep, self.cfg.dx
+        limits = {DT_MAX: ts.max}
+        u = max(max_speed, ts.initial_speed or 0.0)
+        if u > 0:
+            limits[DT_CFL] = ts.cfl * dx / u
+        nu = self.cfg.fluid.viscosity
+        if nu > 0:
+            limits[DT_VISCOUS] = ts.viscous * dx * dx / nu
+        if self.g_abs > 0:
+            limits[DT_FORCE] = ts.force * math.sqrt(dx / self.g_abs)
+        which = min(limits, key=limits.get)
+        return max(limits[which], ts.min), which
+
+
+class Progress:
+    """Progress bar over simulated time with steps/s and ETA (tqdm); quiet when not on a terminal."""
+
+    def __init__(self, end_time: float, enabled: bool | None = None):
+        env = os.environ.get("TAICHI_SPH_PROGRESS")
+        if enabled is None:
+            enabled = env == "1" or (env is None and sys.stderr.isatty())
+        self.bar = None
+        if enabled:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=end_time, unit="s", unit_scale=False, dynamic_ncols=True,
+                            bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} s [{elapsed}<{remaining}{postfix}]")
+        self.t_last = 0.0
+
+    def update(self, t: float, steps_per_s: float, extra: str = ""):
+        if self.bar is not None:
+            self.bar.update(t - self.t_last)
+            self.bar.set_postfix_str(f"{steps_per_s:.1f} steps/s{extra}", refresh=False)
+        self.t_last = t
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+def run(cfg, out_path: str | None = None, arch: str | None = None, progress: bool | None = None) -> dict:
+    """Run a validated config to end_time; returns a summary dict. InstabilityError propagates after the
+    run file has been closed with every frame written so far and a last frame of the failing state."""
+    from . import backend
+    from .io.hdf5 import RunWriter
+
+    out_path = out_path or cfg.output.path
+    be = backend.init(arch or cfg.arch, cfg.precision, cfg.threads)
+    scene = build_scene(cfg)
+    log.info("%s; arch %s, %s", describe(scene), be["arch"], be["precision"])
+
+    from .isph.solver import ISPHSolver
+
+    t_compile = _time.perf_counter()
+    solver = ISPHSolver(cfg, scene)
+    stepper = TimeStepper(cfg, solver.g_abs)
+
+    writer = RunWriter(out_path, mode=cfg.mode, dim=cfg.dim, dx=cfg.dx, arch=be["arch"], config_yaml=resolved_yaml(cfg),
+                       kind=scene.kind, ids=scene.ids, code_version=code_version(),
+                       attrs={"precision": be["precision"], "particle_mass": solver.mass, "rho_w": solver.rho_w,
+                              "n_water": solver.n_water, "support_radius": solver.re, "status": "running"})
+    diag = {k: [] for k in DIAG_COLUMNS}
+    summary = {"out": str(out_path), "arch": be["arch"], "steps": 0, "status": "running"}
+    progress_bar = Progress(cfg.end_time, progress)
+    wall0 = _time.perf_counter()
+    step_wall = 0.0
+    try:
+        first = solver.initial_diagnostics()
+        writer.write_frame(0.0, solver.fields_by_id())
+        summary["compile_and_setup_seconds"] = _time.perf_counter() - t_compile
+        volume0 = first["water_volume"]
+        every = cfg.output.every
+        next_out = every
+        t = 0.0
+        n_fixed = None if stepper.fixed is None else int(round(cfg.end_time / stepper.fixed))
+        speed_bound = solver.max_speed_bound()
+        last = first
+        while True:
+            if n_fixed is not None:
+                if solver.step_count >= n_fixed:
+                    break
+            elif t >= cfg.end_time * (1 - 1e-12):
+                break
+            dt, limit = stepper.choose(last["max_speed"])
+            if n_fixed is None:
+                target = min(next_out, cfg.end_time)
+                if t + dt >= target - 1e-12 * max(1.0, target):
+                    dt, limit = target - t, DT_OUTPUT if target - t < dt else limit
+            s0 = _time.perf_counter()
+            last = solver.step(dt)
+            s1 = _time.perf_counter()
+            step_wall += s1 - s0
+            t = solver.step_count * stepper.fixed if n_fixed is not None else t + dt
+            solver.time = t
+            for key, val in (("time", t), ("dt", dt), ("kinetic_energy", last["kinetic_energy"]),
+                             ("max_speed", last["max_speed"]), ("water_volume", last["water_volume"]),
+                             ("cg_iterations", last["cg_iterations"]), ("cg_residual", last["cg_residual"]),
+                             ("wall_seconds", s1 - s0), ("dt_limit", limit), ("free_surface", last["free_surface"])):
+                diag[key].append(val)
+            if last["max_speed"] > speed_bound:
+                pid = _fastest_particle(solver)
+                raise InstabilityError(
+                    f"step {solver.step_count}, t = {t:.6g} s: speed {last['max_speed']:.4g} m/s exceeds the bound "
+                    f"{speed_bound:.4g} m/s (guard.max_speed) at particle id {pid}", step=solver.step_count, time=t,
+                    quantity="speed", particles=[pid])
+            if t >= next_out - 1e-9 * every:
+                writer.write_frame(t, solver.fields_by_id())
+                _flush_diag(writer, diag)
+                while next_out <= t + 1e-9 * every:
+                    next_out += every
+            progress_bar.update(t, solver.step_count / max(step_wall, 1e-9),
+                                f", CG {last['cg_iterations']}")
+        summary["status"] = "completed"
+    except InstabilityError as exc:
+        summary["status"] = "unstable"
+        summary["error"] = str(exc)
+        try:
+            writer.write_frame(solver.time, solver.fields_by_id())
+        except Exception:  # noqa: BLE001  (the state may be beyond writing; earlier frames are kept)
+            pass
+        raise
+    except KeyboardInterrupt:
+        summary["status"] = "interrupted"
+        raise
+    finally:
+        progress_bar.close()
+        _flush_diag(writer, diag)
+        wall = _time.perf_counter() - wall0
+        steps = solver.step_count
+        psps = solver.n_water * steps / step_wall if step_wall > 0 else 0.0
+        summary.update(steps=steps, wall_seconds=wall, step_seconds=step_wall, mipps=psps / 1e6,
+                       removed_particles=solver.removed_total, phase_seconds=dict(solver.timers))
+        writer.set_attrs(status=summary["status"], exit_reason=summary.get("error", ""), steps=steps,
+                         wall_seconds=wall, step_seconds=step_wall, mipps=psps / 1e6,
+                         removed_particles=solver.removed_total)
+        writer.close()
+    if volume0 > 0:
+        summary["volume_drift"] = last["water_volume"] / volume0 - 1.0
+    return summary
+
+
+def _flush_diag(writer, diag):
+    if diag["time"]:
+        writer.append_diagnostics({k: np.asarray(v) for k, v in diag.items()})
+        for v in diag.values():
+            v.clear()
+
+
+def _fastest_particle(solver) -> int:
+    f = solver.fields_by_id()
+    speed = np.linalg.norm(f["velocity"], axis=1)
+    return int(np.nanargmax(np.where(np.isfinite(speed), speed, np.inf)))

@@ -1,0 +1,303 @@
+"""Uniform-grid neighbour search shared by both solver modes.
+
+Particles are binned into cubic cells of edge `cell_size` covering the box [lo, hi) and ordered by
+cell with a counting sort: per-cell counts (atomic), an exclusive prefix sum over the cells and a
+scatter into `perm`. A counting sort has no per-cell capacity, so a cell can never overflow however
+many particles crowd into it. Inactive particles and particles outside [lo, hi) go to a sentinel
+cell `num_cells` after all real cells; `sort()` deactivates particles that were active but left the
+box and returns their indices.
+
+On CPU the scan and the scatter run serially (``ti.loop_config(serialize=True)``): within a cell the
+particles keep ascending original index, so `perm` is deterministic. On GPU the scatter is atomic and
+the order inside a cell may vary from run to run. The scan is serial on every backend (one pass over
+the cells).
+
+`sort()` only computes `perm`; `reorder()` applies it to any per-particle field. After sorting and
+reordering positions, `build_neighbour_lists()` writes an explicit neighbour list per particle by
+scanning the 3^dim cells around it.
+"""
+
+import math
+
+import numpy as np
+import taichi as ti
+
+
+class NeighbourOverflowError(RuntimeError):
+    """A particle has more neighbours than the neighbour list can hold."""
+
+    def __init__(self, index: int, particle_id: int | None, count: int, capacity: int, rows: int = 1):
+        self.index = int(index)
+        self.particle_id = None if particle_id is None else int(particle_id)
+        self.count = int(count)
+        self.capacity = int(capacity)
+        self.rows = int(rows)
+        who = f"particle id {self.particle_id}" if self.particle_id is not None else f"particle index {self.index}"
+        others = f" ({self.rows} particles over the limit)" if self.rows > 1 else ""
+        super().__init__(
+            f"{who} has {self.count} neighbours but the neighbour list holds {self.capacity}{others}; "
+            f"raise the config key `neighbours.max` to at least {self.count}"
+        )
+
+
+def _is_cpu_arch(arch) -> bool:
+    return arch in (ti.x64, ti.arm64)
+
+
+@ti.data_oriented
+class NeighbourGrid:
+    """Cell grid, counting sort and explicit neighbour lists for up to `capacity` particles."""
+
+    def __init__(self, capacity: int, dim: int, lo, hi, cell_size: float, max_neighbours: int):
+        if dim not in (2, 3):
+            raise ValueError(f"dim must be 2 or 3, not {dim}")
+        lo = np.asarray(lo, dtype=float).reshape(-1)
+        hi = np.asarray(hi, dtype=float).reshape(-1)
+        if lo.size != dim or hi.size != dim:
+            raise ValueError(f"lo and hi need {dim} components, got {lo.size} and {hi.size}")
+        if not np.all(hi > lo):
+            raise ValueError(f"grid box is empty: lo={lo.tolist()}, hi={hi.tolist()}")
+        if not cell_size > 0.0:
+            raise ValueError(f"cell_size must be positive, not {cell_size}")
+        if capacity < 1 or max_neighbours < 1:
+            raise ValueError("capacity and max_neighbours must be at least 1")
+        self.dim = int(dim)
+        self.capacity = int(capacity)
+        self.cell_size = float(cell_size)
+        self.max_neighbours = int(max_neighbours)
+        self.lo = lo
+        self.hi = hi
+        self.ncell = tuple(max(1, int(math.ceil((hi[d] - lo[d]) / self.cell_size))) for d in range(dim))
+        self.num_cells = int(np.prod(self.ncell))
+        # python floats/ints for ti.static use inside kernels
+        self._lo = [float(v) for v in lo]
+        self._hi = [float(v) for v in hi]
+        self._serial = _is_cpu_arch(ti.lang.impl.current_cfg().arch)
+
+        self.perm = ti.field(ti.i32, self.capacity)
+        self.cell_start = ti.field(ti.i32, self.num_cells + 1)
+        self.nbr_count = ti.field(ti.i32, self.capacity)
+        self.nbr = ti.field(ti.i32, (self.capacity, self.max_neighbours))
+        self._cell = ti.field(ti.i32, self.capacity)  # cell of particle i, original order
+        self._cell_sorted = ti.field(ti.i32, self.capacity)  # cell of position k, sorted order
+        self._left = ti.field(ti.i8, self.capacity)  # 1 if deactivated by the last sort()
+        self._count = ti.field(ti.i32, self.num_cells + 1)
+        self._cursor = ti.field(ti.i32, self.num_cells + 1)
+        self._raw_count = ti.field(ti.i32, self.capacity)  # true neighbour count, not clamped
+        self._ovf_max = ti.field(ti.i32, ())
+        self._ovf_rows = ti.field(ti.i32, ())
+        self._ovf_index = ti.field(ti.i32, ())
+        self._scratch = {}
+        self._sorted_n = None
+
+    # ------------------------------------------------------------------ sort
+    @ti.kernel
+    def _bin(self, x: ti.template(), active: ti.template(), n: ti.i32) -> ti.i32:
+        for c in range(self.num_cells + 1):
+            self._count[c] = 0
+        left = 0
+        for i in range(n):
+            c = self.num_cells
+            self._left[i] = ti.i8(0)
+            if active[i] != 0:
+                inside = 1
+                lin = 0
+                for d in ti.static(range(self.dim)):
+                    p = x[i][d]
+                    # NaN fails both comparisons and counts as outside
+                    if not (p >= ti.static(self._lo[d]) and p < ti.static(self._hi[d])):
+                        inside = 0
+                    ic = 0
+                    if inside:
+                        ic = ti.min(ti.cast((p - ti.static(self._lo[d])) / ti.static(self.cell_size), ti.i32),
+                                    ti.static(self.ncell[d] - 1))
+                    lin = lin * ti.static(self.ncell[d]) + ic
+                if inside:
+                    c = lin
+                else:
+                    active[i] = ti.cast(0, active.dtype)
+                    self._left[i] = ti.i8(1)
+                    left += 1
+            self._cell[i] = c
+            ti.atomic_add(self._count[c], 1)
+        return left
+
+    @ti.kernel
+    def _scan_scatter(self, n: ti.i32):
+        ti.loop_config(serialize=True)
+        for c in range(self.num_cells + 1):
+            if c == 0:
+                self.cell_start[0] = 0
+                self._cursor[0] = 0
+            else:
+                s = self.cell_start[c - 1] + self._count[c - 1]
+                self.cell_start[c] = s
+                self._cursor[c] = s
+        if ti.static(self._serial):
+            ti.loop_config(serialize=True)
+            for i in range(n):
+                c = self._cell[i]
+                k = self._cursor[c]
+                self._cursor[c] = k + 1
+                self.perm[k] = i
+                self._cell_sorted[k] = c
+        else:
+            for i in range(n):
+                c = self._cell[i]
+                k = ti.atomic_add(self._cursor[c], 1)
+                self.perm[k] = i
+                self._cell_sorted[k] = c
+
+    def sort(self, x, active, n: int) -> np.ndarray:
+        """Bin the first `n` particles and compute `perm` (new position k holds old particle perm[k]).
+
+        Active particles outside [lo, hi) (or with non-finite positions) are set inactive. Returns
+        their original indices (usually empty). Moves no data: call `reorder()` on each field.
+        """
+        n = int(n)
+        if not 0 <= n <= self.capacity:
+            raise ValueError(f"n={n} outside [0, capacity={self.capacity}]")
+        left = self._bin(x, active, n)
+        self._scan_scatter(n)
+        self._sorted_n = n
+        if left == 0:
+            return np.zeros(0, dtype=np.int64)
+        return np.nonzero(self._left.to_numpy()[:n])[0].astype(np.int64)
+
+    # --------------------------------------------------------------- reorder
+    @ti.kernel
+    def _gather(self, src: ti.template(), tmp: ti.template(), n: ti.i32):
+        for k in range(n):
+            p = self.perm[k]
+            if ti.static(len(src.shape) == 1):
+                tmp[k] = src[p]
+            else:
+                for j in range(src.shape[1]):
+                    tmp[k, j] = src[p, j]
+        for k in range(n):
+            if ti.static(len(src.shape) == 1):
+                src[k] = tmp[k]
+            else:
+                for j in range(src.shape[1]):
+                    src[k, j] = tmp[k, j]
+
+    def _scratch_for(self, field):
+        shape = tuple(field.shape)
+        if isinstance(field, ti.MatrixField):
+            if field.ndim == 1:
+                key = ("vec", field.dtype, (field.n,), shape)
+            else:
+                key = ("mat", field.dtype, (field.n, field.m), shape)
+        elif isinstance(field, ti.ScalarField):
+            key = ("scalar", field.dtype, (), shape)
+        else:
+            raise TypeError(f"reorder() needs a Taichi field, got {type(field).__name__}")
+        tmp = self._scratch.get(key)
+        if tmp is None:
+            kind, dtype, elem, _ = key
+            if kind == "vec":
+                tmp = ti.Vector.field(elem[0], dtype, shape)
+            elif kind == "mat":
+                tmp = ti.Matrix.field(elem[0], elem[1], dtype, shape)
+            else:
+                tmp = ti.field(dtype, shape)
+            self._scratch[key] = tmp
+        return tmp
+
+    def reorder(self, field, n: int):
+        """Permute a per-particle field in place: field[k] = old field[perm[k]] for k < n."""
+        n = int(n)
+        if self._sorted_n is None:
+            raise RuntimeError("reorder() called before sort()")
+        if n != self._sorted_n:
+            raise ValueError(f"reorder(n={n}) does not match the last sort(n={self._sorted_n})")
+        shape = tuple(field.shape)
+        if len(shape) not in (1, 2) or shape[0] < n:
+            raise ValueError(f"cannot reorder a field of shape {shape} with n={n}")
+        self._gather(field, self._scratch_for(field), n)
+
+    # ------------------------------------------------------- neighbour lists
+    @ti.kernel
+    def _build(self, x: ti.template(), mask: ti.template(), n: ti.i32, radius: float) -> ti.i32:
+        self._ovf_max[None] = 0
+        r2max = radius * radius
+        overflow = 0
+        for i in range(n):
+            cnt = 0
+            c = self._cell_sorted[i]
+            if mask[i] != 0 and c < self.num_cells:
+                # cell coordinates, last axis fastest
+                cc = ti.Vector.zero(ti.i32, ti.static(self.dim))
+                rest = c
+                for d in ti.static(range(self.dim - 1, -1, -1)):
+                    cc[d] = rest % ti.static(self.ncell[d])
+                    rest = rest // ti.static(self.ncell[d])
+                # along the last axis the 3 neighbouring cells are consecutive, so each row of cells
+                # is one contiguous particle range [cell_start[first], cell_start[last + 1])
+                zlo = ti.max(cc[self.dim - 1] - 1, 0)
+                zhi = ti.min(cc[self.dim - 1] + 1, ti.static(self.ncell[self.dim - 1] - 1))
+                xi = x[i]
+                for off in ti.static(ti.grouped(ti.ndrange(*([(-1, 2)] * (self.dim - 1))))):
+                    ok = 1
+                    lin = 0
+                    for d in ti.static(range(self.dim - 1)):
+                        nd = cc[d] + off[d]
+                        if nd < 0 or nd >= ti.static(self.ncell[d]):
+                            ok = 0
+                        lin = lin * ti.static(self.ncell[d]) + nd
+                    if ok:
+                        lin = lin * ti.static(self.ncell[self.dim - 1])
+                        for j in range(self.cell_start[lin + zlo], self.cell_start[lin + zhi + 1]):
+                            if j != i:
+                                dx = xi - x[j]
+                                if dx.dot(dx) < r2max:
+                                    if cnt < ti.static(self.max_neighbours):
+                                        self.nbr[i, cnt] = j
+                                    cnt += 1
+            self._raw_count[i] = cnt
+            if cnt > ti.static(self.max_neighbours):
+                overflow += 1
+                ti.atomic_max(self._ovf_max[None], cnt)
+            self.nbr_count[i] = ti.min(cnt, ti.static(self.max_neighbours))
+        return overflow
+
+    @ti.kernel
+    def _find_overflow(self, n: ti.i32):
+        self._ovf_index[None] = n
+        for i in range(n):
+            if self._raw_count[i] == self._ovf_max[None]:
+                ti.atomic_min(self._ovf_index[None], i)
+
+    def build_neighbour_lists(self, x, mask, n: int, radius: float, ids=None):
+        """Fill `nbr` / `nbr_count` for rows i < n with mask[i] != 0: all j != i with |x_i - x_j| < radius.
+
+        Call after `sort()` and `reorder()` of `x` and `mask`. Rows with mask 0, and particles in the
+        sentinel cell, get no neighbours. Raises NeighbourOverflowError (naming the particle with the
+        most neighbours, `ids[index]` when `ids` is given) if a row exceeds `max_neighbours`.
+        """
+        n = int(n)
+        radius = float(radius)
+        if self._sorted_n is None:
+            raise RuntimeError("build_neighbour_lists() called before sort()")
+        if n != self._sorted_n:
+            raise ValueError(f"build_neighbour_lists(n={n}) does not match the last sort(n={self._sorted_n})")
+        if not 0.0 < radius <= self.cell_size:
+            raise ValueError(f"radius {radius} must be positive and at most the cell size {self.cell_size}")
+        rows = self._build(x, mask, n, radius)
+        if rows > 0:
+            self._find_overflow(n)
+            index = int(self._ovf_index[None])
+            count = int(self._ovf_max[None])
+            pid = int(ids[index]) if ids is not None else None
+            raise NeighbourOverflowError(index, pid, count, self.max_neighbours, rows)
+
+    @ti.kernel
+    def _max_count(self, n: ti.i32) -> ti.i32:
+        m = 0
+        for i in range(n):
+            ti.atomic_max(m, self.nbr_count[i])
+        return m
+
+    def max_count(self, n: int) -> int:
+        """Largest nbr_count over the first n rows."""
+        return int(self._max_count(int(n)))
