@@ -23,7 +23,7 @@ DT_FIXED, DT_CFL, DT_VISCOUS, DT_FORCE, DT_MAX, DT_OUTPUT = range(6)
 DT_LIMIT_NAMES = {DT_FIXED: "fixed", DT_CFL: "cfl", DT_VISCOUS: "viscous", DT_FORCE: "force", DT_MAX: "max",
                   DT_OUTPUT: "output"}
 DIAG_COLUMNS = ("time", "dt", "kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
-                "wall_seconds", "dt_limit", "free_surface")
+                "wall_seconds", "dt_limit", "free_surface", "collisions")
 
 
 def code_version() -> str:
@@ -134,9 +134,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                 break
             dt, limit = stepper.choose(last["max_speed"])
             if n_fixed is None:
-                target = min(next_out, cfg.end_time)
-                if t + dt >= target - 1e-12 * max(1.0, target):
-                    dt, limit = target - t, DT_OUTPUT if target - t < dt else limit
+                dt, limit = land_on(t, dt, limit, min(next_out, cfg.end_time))
             s0 = _time.perf_counter()
             last = solver.step(dt)
             s1 = _time.perf_counter()
@@ -146,7 +144,8 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             for key, val in (("time", t), ("dt", dt), ("kinetic_energy", last["kinetic_energy"]),
                              ("max_speed", last["max_speed"]), ("water_volume", last["water_volume"]),
                              ("cg_iterations", last["cg_iterations"]), ("cg_residual", last["cg_residual"]),
-                             ("wall_seconds", s1 - s0), ("dt_limit", limit), ("free_surface", last["free_surface"])):
+                             ("wall_seconds", s1 - s0), ("dt_limit", limit), ("free_surface", last["free_surface"]),
+                             ("collisions", last["collisions"])):
                 diag[key].append(val)
             if last["max_speed"] > speed_bound:
                 pid = _fastest_particle(solver)
@@ -188,6 +187,18 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     if volume0 > 0:
         summary["volume_drift"] = last["water_volume"] / volume0 - 1.0
     return summary
+
+
+def land_on(t: float, dt: float, limit: int, target: float) -> tuple[float, int]:
+    """Shorten an adaptive step so that steps land on `target` without ever becoming tiny: the
+    remaining interval r is taken whole when r <= dt and in two halves when dt < r < 2 dt. (A tiny
+    step would make the PPE's density term alpha (rho_bar - <rho>) / dt^2 explode.)"""
+    r = target - t
+    if r <= dt * (1 + 1e-9):
+        return r, DT_OUTPUT
+    if r < 2 * dt:
+        return 0.5 * r, DT_OUTPUT
+    return dt, limit
 
 
 def _flush_diag(writer, diag):

@@ -99,6 +99,17 @@ class ISPH(Strict):
     #: pressure gradient: eq 12 difference form with kernel-gradient correction (default),
     #: plain eq 12, or the symmetric eq 13 form
     gradient: Literal["corrected", "difference", "symmetric"] = "corrected"
+    #: near-contact collision model (MPS family): water particles closer than this fraction of dx
+    #: lose their approaching relative velocity (walls: the velocity into the wall); 0 disables.
+    #: Acts only on pairs far closer than the lattice spacing; its events are counted per step.
+    collision_distance: Annotated[float, Field(ge=0, lt=1)] = 0.8
+    #: coefficient of restitution of those collisions
+    collision_restitution: Annotated[float, Field(ge=0, le=1)] = 0.2
+    #: particle shifting against clustering (Fick's law, Lind et al. 2012 with Skillen et al. 2013's
+    #: coefficient): dr = -A h |u| dt grad C, tangential only near the free surface; 0 disables
+    shifting: NonNegFloat = 2.0
+    #: largest shift per step, as a fraction of dx
+    shifting_max: Annotated[float, Field(gt=0, le=0.5)] = 0.1
     ppe: PPESolver = PPESolver()
 
 

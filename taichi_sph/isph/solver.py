@@ -63,6 +63,13 @@ class ISPHSolver:
         self.no_slip = cfg.tank.boundary == "no_slip"
         self.grad_mode = _GRAD[cfg.isph.gradient]
         self.pore_advection = True
+        self.shifting = cfg.isph.shifting > 0
+        self.shift_a = cfg.isph.shifting
+        self.shift_max = cfg.isph.shifting_max * dx
+        self.w_dx = kernels.sigma(dim, self.h) * _spline(dx / self.h)
+        self.collision = cfg.isph.collision_distance > 0
+        self.r_coll = cfg.isph.collision_distance * dx
+        self.restitution = cfg.isph.collision_restitution
 
         self.n = scene.n
         self.n_water = scene.count(WATER)
@@ -88,6 +95,11 @@ class ISPHSolver:
         self.b = ti.field(float, max(self.n_water, 1))
         self.psol = ti.field(float, max(self.n_water, 1))
         self.triplets = ti.field(ti.i32, ())
+        self.vtmp = ti.Vector.field(dim, float, n)
+        self.grad_c = ti.Vector.field(dim, float, n)
+        self.wall_acc = ti.field(float, n)
+        self.wall_wsum = ti.field(float, n)
+        self.collisions = ti.field(ti.i32, ())
         self.dt = ti.field(float, ())
         self.g = vec(self.g_np.tolist())
         self._vec = vec
@@ -150,6 +162,7 @@ class ISPHSolver:
                 xi = self.x[i]
                 wsum = kernels.w(0.0, self.h, self.dim)
                 M = ti.Matrix.zero(float, self.dim, self.dim)
+                gc = ti.Vector.zero(float, self.dim)
                 n_water = 0
                 nb = self.grid.nbr_count[i]
                 for k in range(nb):
@@ -162,8 +175,14 @@ class ISPHSolver:
                         n_water += 1
                         vj = self.mass / (self.eps[j] * self.rho_w)
                     if r > 0.0:
-                        M += vj * (-rij).outer_product(kernels.grad_w(rij, r, self.h, self.dim))
+                        gw = kernels.grad_w(rij, r, self.h, self.dim)
+                        M += vj * (-rij).outer_product(gw)
+                        if ti.static(self.shifting):
+                            ratio = kernels.w(r, self.h, self.dim) / self.w_dx
+                            gc += vj * (1.0 + 0.2 * ratio**4) * gw
                 self.rho_n[i] = self.mass * wsum / self.kernel_sum
+                if ti.static(self.shifting):
+                    self.grad_c[i] = gc
                 is_free = 0
                 if nb < self.eps[i] * self.n_surf or n_water == 0:
                     is_free = 1
@@ -308,6 +327,33 @@ class ISPHSolver:
                 self.psol[self.row[i]] = self.p[i]
 
     @ti.kernel
+    def _k_wall_pressure(self):
+        """Wall pressure interpolated from the solved fluid pressure with hydrostatic correction
+        (Adami et al. 2012 form, the virtual-marker idea of the seed): P_w = sum_f W_wf (P_f +
+        rho_w g . (x_w - x_f)) / sum_f W_wf, accumulated from the fluid side of each pair."""
+        for i in range(self.n):
+            if self.kind[i] == WALL:
+                self.wall_acc[i] = 0.0
+                self.wall_wsum[i] = 0.0
+        for i in range(self.n):
+            if self.solve_mask[i] == 1:
+                xi = self.x[i]
+                for k in range(self.grid.nbr_count[i]):
+                    j = self.grid.nbr[i, k]
+                    if self.kind[j] == WALL:
+                        r = (xi - self.x[j]).norm()
+                        wij = kernels.w(r, self.h, self.dim)
+                        ti.atomic_add(self.wall_acc[j], wij * terms.wall_pressure(self.p[i], self.rho_w, self.g,
+                                                                                   self.x[j], xi))
+                        ti.atomic_add(self.wall_wsum[j], wij)
+        for i in range(self.n):
+            if self.kind[i] == WALL:
+                pw = 0.0
+                if self.wall_wsum[i] > 0.0:
+                    pw = self.wall_acc[i] / self.wall_wsum[i]
+                self.p[i] = pw
+
+    @ti.kernel
     def _k_corrector(self):
         """v = v* - k grad P (eq 20), gradient by eq 12 (optionally corrected) or eq 13."""
         for i in range(self.n):
@@ -324,9 +370,7 @@ class ISPHSolver:
                         gw = kernels.grad_w(rij, r, self.h, self.dim)
                         pj = self.p[j]
                         rb_j = rb_i
-                        if self.kind[j] == WALL:
-                            pj = terms.wall_pressure(pi, self.rho_w, self.g, self.x[j], xi)
-                        else:
+                        if self.kind[j] != WALL:
                             rb_j = self.eps[j] * self.rho_w
                         if ti.static(self.grad_mode == GRAD_SYMMETRIC):
                             gp += self.mass * (pj / (rb_j * rb_j) + pi / (rb_i * rb_i)) * gw
@@ -339,14 +383,75 @@ class ISPHSolver:
                 self.v[i] = self.vstar[i] - self.kcoef[i] * gp
 
     @ti.kernel
+    def _k_collision(self):
+        """Near-contact collisions. Water pairs closer than r_coll that approach lose (1 + e)/2 of their
+        relative normal velocity (equal masses). At walls the kinematic condition v . n >= 0 is enforced
+        on particles closer to the wall surface than r_coll / 2 (a particle at rest sits dx / 2 from it):
+        the velocity into the wall is reversed with restitution e. The wall surface lies dx / 2 beyond
+        the first wall layer along the wall particle's normal."""
+        self.collisions[None] = 0
+        for i in range(self.n):
+            if self.solve_mask[i] == 1:
+                xi = self.x[i]
+                vi = self.v[i]
+                dv = ti.Vector.zero(float, self.dim)
+                d_wall = 1.0e30
+                n_wall = ti.Vector.zero(float, self.dim)
+                for k in range(self.grid.nbr_count[i]):
+                    j = self.grid.nbr[i, k]
+                    rij = self.x[j] - xi
+                    r = rij.norm()
+                    if self.kind[j] == WALL:
+                        d = (xi - self.x[j]).dot(self.normal[j]) - 0.5 * self.dx
+                        if d < d_wall:
+                            d_wall = d
+                            n_wall = self.normal[j]
+                    elif r < self.r_coll and r > 0.0:
+                        e = rij / r
+                        vrel = (vi - self.v[j]).dot(e)
+                        if vrel > 0.0:
+                            dv -= 0.5 * (1.0 + self.restitution) * vrel * e
+                            ti.atomic_add(self.collisions[None], 1)
+                vnew = vi + dv
+                if d_wall < 0.5 * self.r_coll:
+                    vn = vnew.dot(n_wall)
+                    if vn < 0.0:
+                        vnew -= (1.0 + self.restitution) * vn * n_wall
+                        ti.atomic_add(self.collisions[None], 1)
+                self.vtmp[i] = vnew
+        for i in range(self.n):
+            if self.solve_mask[i] == 1:
+                self.v[i] = self.vtmp[i]
+
+    @ti.kernel
     def _k_advect(self):
+        """x += dt u, u = v / eps (pore) or v (Darcy); plus the shifting displacement
+        dr = -A h |u| dt grad C (grad C with Lind's anti-pairing term), with its component along the
+        surface normal n = -grad C / |grad C| removed for particles within the support of a free-surface
+        particle, and capped at shifting_max."""
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 dt = self.dt[None]
                 u = self.v[i]
                 if ti.static(self.pore_advection):
                     u = u / self.eps[i]
-                self.x[i] += dt * u
+                dr = dt * u
+                if ti.static(self.shifting):
+                    gc = self.grad_c[i]
+                    ds = -self.shift_a * self.h * u.norm() * dt * gc
+                    near_surface = self.free[i]
+                    for k in range(self.grid.nbr_count[i]):
+                        j = self.grid.nbr[i, k]
+                        if self.kind[j] == WATER and self.free[j] == 1:
+                            near_surface = 1
+                    if near_surface == 1 and gc.norm() > 0.0:
+                        nrm = -gc.normalized()
+                        ds -= ds.dot(nrm) * nrm
+                    mag = ds.norm()
+                    if mag > self.shift_max:
+                        ds *= self.shift_max / mag
+                    dr += ds
+                self.x[i] += dr
 
     @ti.kernel
     def _k_diagnostics(self) -> ti.types.vector(6, float):
@@ -432,7 +537,12 @@ class ISPHSolver:
             log.warning(msg)
         self.psol.from_numpy(sol.astype(self.np_fp))
         self._k_scatter_pressure()
+        self._k_wall_pressure()
         self._k_corrector()
+        collisions = 0
+        if self.collision:
+            self._k_collision()
+            collisions = int(self.collisions[None])
         self._k_advect()
         t0 = self._tick("corrector", t0)
         self.step_count += 1
@@ -440,7 +550,8 @@ class ISPHSolver:
         d = self._k_diagnostics().to_numpy()
         self._tick("diagnostics", t0)
         self.last = {"kinetic_energy": float(d[0]), "max_speed": float(d[1]), "water_volume": float(d[2]),
-                     "cg_iterations": iters, "cg_residual": res, "free_surface": int(d[5])}
+                     "cg_iterations": iters, "cg_residual": res, "free_surface": int(d[5]),
+                     "collisions": collisions}
         if d[3] > 0:
             raise InstabilityError(
                 f"step {self.step_count}, t = {self.time:.6g} s: non-finite position, velocity or pressure at "
@@ -454,7 +565,7 @@ class ISPHSolver:
         self._k_density()
         d = self._k_diagnostics().to_numpy()
         self.last = {"kinetic_energy": float(d[0]), "max_speed": float(d[1]), "water_volume": float(d[2]),
-                     "cg_iterations": 0, "cg_residual": 0.0, "free_surface": int(d[5])}
+                     "cg_iterations": 0, "cg_residual": 0.0, "free_surface": int(d[5]), "collisions": 0}
         return self.last
 
     # ------------------------------------------------------------------ output
@@ -480,6 +591,10 @@ class ISPHSolver:
             return self.cfg.guard.max_speed
         height = float(self.cfg.tank.size[-1])
         return 20.0 * math.sqrt(self.g_abs * height) if self.g_abs > 0 else 100.0
+
+
+def _spline(q: float) -> float:
+    return float(kernels.w_np(q * 1.0, 1.0, 1) / kernels.sigma(1, 1.0))
 
 
 def _ids_text(ids, limit=10) -> str:
