@@ -46,4 +46,5 @@ def init(arch: str = "cpu", precision: str = "auto", threads: int | None = None,
         break
     if chosen is None:
         raise InputError(f"--arch {arch}: no usable Taichi backend ({last_err})")
-    return {"arch": str(chosen[0]).split(".")[-1], "precision": chosen[1]}
+    name = str(chosen[0]).split(".")[-1]
+    return {"arch": "cpu" if name in ("x64", "arm64") else name, "precision": chosen[1]}

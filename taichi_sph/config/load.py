@@ -66,6 +66,8 @@ def _index(node: list, part: str, key: str) -> int:
 
 def read_yaml(path) -> dict:
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"config file '{path}' is a directory")
     if not p.is_file():
         raise InputError(f"config file '{path}' does not exist")
     try:

@@ -21,9 +21,9 @@ PosInt = Annotated[int, Field(gt=0)]
 
 
 class Strict(BaseModel):
-    """Base: unknown keys are errors, no silent coercion of strings to numbers."""
+    """Base: unknown keys are errors; no coercion of strings or booleans to numbers; no inf or nan."""
 
-    model_config = ConfigDict(extra="forbid", strict=False, validate_default=True)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, validate_default=True)
 
 
 class Box(Strict):

@@ -1,0 +1,203 @@
+"""Bad input on the command line (SPEC section 6): exit code 2, a one-line message on stderr that
+names the offending key or file, and nothing written. Validation happens before Taichi starts, so
+these subprocesses compile no kernels and finish in well under a second each."""
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+HYDROSTATIC = "configs/hydrostatic.yaml"
+
+# A minimal valid 2D case, written to tmp_path and then broken in one place per case.
+GOOD_YAML = """\
+mode: isph
+dim: 2
+dx: 0.02
+end_time: 0.1
+dt: 0.001
+output:
+  path: out/small.h5
+  every: 0.05
+tank:
+  size: [0.2, 0.2]
+water:
+  - {min: [0.0, 0.0], max: [0.2, 0.1]}
+"""
+
+NO_TANK_YAML = GOOD_YAML.replace("tank:\n  size: [0.2, 0.2]\n", "")
+INVALID_YAML = "dx: [0.02, 0.03\nend_time: : 0.1\n  tank: {size: [0.2\n"
+LIST_YAML = "- dx: 0.02\n- end_time: 0.1\n"
+TANK_3_VALUES_YAML = GOOD_YAML.replace("size: [0.2, 0.2]", "size: [0.2, 0.2, 0.2]")
+BLOCK_OUTSIDE_YAML = GOOD_YAML.replace("max: [0.2, 0.1]", "max: [0.3, 0.1]")
+BLOCK_EMPTY_YAML = GOOD_YAML.replace("max: [0.2, 0.1]", "max: [0.2, 0.0]")
+
+def case(case_id, args, expect, files=None, marks=()):
+    """args: CLI arguments ('{tmp}' is replaced by tmp_path; '--config hydrostatic' is added when
+    no config is given and the command is `run`; '--out {tmp}/sub/run.h5' is added when no --out is
+    given). expect: substrings the single error line must contain. files: name -> text written
+    to tmp_path before the run."""
+    return pytest.param(args, expect, files or {}, id=case_id, marks=marks)
+
+
+CASES = [
+    # --- config keys -------------------------------------------------------------------------
+    case("unknown-top-level-key", ["--set", "foo=1"], ["'foo'", "unknown key"]),
+    case("unknown-nested-key", ["--set", "isph.foo=1"], ["'isph.foo'", "unknown key"]),
+    case("unknown-key-in-file", ["--config", "{tmp}/extra.yaml"], ["'wave_height'", "unknown key"],
+         files={"extra.yaml": GOOD_YAML + "wave_height: 0.1\n"}),
+    case("wrong-type-dx", ["--set", "dx=abc"], ["'dx'", "abc"]),
+    case("dx-negative", ["--set", "dx=-0.01"], ["'dx'", "greater than 0"]),
+    case("dx-zero", ["--set", "dx=0"], ["'dx'", "greater than 0"]),
+    case("dx-nan", ["--set", "dx=.nan"], ["'dx'"]),
+    case("end-time-negative", ["--set", "end_time=-1"], ["'end_time'", "greater than 0"]),
+    case("alpha-negative", ["--set", "isph.alpha=-0.1"], ["'isph.alpha'"]),
+    case("collision-distance-too-large", ["--set", "isph.collision_distance=1"],
+         ["'isph.collision_distance'"]),
+    case("ppe-on-failure-bad-choice", ["--set", "isph.ppe.on_failure=ignore"], ["'isph.ppe.on_failure'"]),
+    case("dim-4", ["--set", "dim=4"], ["'dim'"]),
+    case("water-block-outside-tank", ["--config", "{tmp}/outside.yaml"], ["'water[0]'", "outside the tank"],
+         files={"outside.yaml": BLOCK_OUTSIDE_YAML}),
+    case("water-block-outside-tank-set", ["--set", "water.0.max=[0.5, 0.3]"], ["'water[0]'", "outside"]),
+    case("water-block-max-not-above-min", ["--config", "{tmp}/empty_block.yaml"], ["'water[0]'", "max must exceed min"],
+         files={"empty_block.yaml": BLOCK_EMPTY_YAML}),
+    case("water-list-empty", ["--set", "water=[]"], ["'water'"]),
+    case("tank-size-wrong-length", ["--config", "{tmp}/tank3.yaml"], ["'tank.size'", "needs 2 values"],
+         files={"tank3.yaml": TANK_3_VALUES_YAML}),
+    case("tank-size-wrong-length-set", ["--set", "tank.size=[0.4, 0.4, 0.4]"], ["'tank.size'"]),
+    case("gravity-wrong-length", ["--set", "gravity=[0]"], ["'gravity'"]),
+    case("tank-smaller-than-two-particles", ["--set", "dx=0.3"], ["'tank.size'"]),
+    case("missing-required-tank", ["--config", "{tmp}/notank.yaml"], ["'tank'", "required key is missing"],
+         files={"notank.yaml": NO_TANK_YAML}),
+    case("section-given-a-value", ["--set", "tank=5"], ["'tank'"]),
+    case("value-used-as-section", ["--set", "dx.foo=1"], ["'dx'"]),
+    case("list-index-out-of-range", ["--set", "water.3.min=[0, 0]"], ["'water.3.min'", "out of range"]),
+    case("mode-wcsph-biot-unavailable", ["--set", "mode=wcsph_biot"], ["'mode'", "wcsph_biot"]),
+    case("mode-unknown", ["--set", "mode=lbm"], ["'mode'"]),
+    case("dt-larger-than-output-every", ["--set", "dt=0.1"], ["'output.every'"]),
+    case("dt-not-below-end-time", ["--set", "end_time=0.001", "--set", "output.every=0.001"], ["'dt'"]),
+    case("end-time-infinite", ["--set", "end_time=.inf", "--set", "dx=0.04"], ["'end_time'"]),
+    case("end-time-boolean", ["--set", "end_time=true", "--check"], ["'end_time'"]),
+    case("dx-quoted-string", ["--set", 'dx="0.01"', "--check"], ["'dx'"]),
+    # --- config files ------------------------------------------------------------------------
+    case("config-file-missing", ["--config", "{tmp}/nothere.yaml"], ["nothere.yaml", "does not exist"]),
+    case("config-file-invalid-yaml", ["--config", "{tmp}/broken.yaml"], ["broken.yaml", "not valid YAML"],
+         files={"broken.yaml": INVALID_YAML}),
+    case("config-top-level-list", ["--config", "{tmp}/list.yaml"], ["list.yaml", "mapping"],
+         files={"list.yaml": LIST_YAML}),
+    case("config-file-empty", ["--config", "{tmp}/empty.yaml"], ["empty.yaml"], files={"empty.yaml": ""}),
+    case("config-is-directory", ["--config", "{tmp}/cfgdir"], ["cfgdir"], files={"cfgdir/": None}),
+    # --- command line ------------------------------------------------------------------------
+    case("set-without-equals", ["--set", "dx"], ["--set 'dx'", "key=value"]),
+    case("set-empty-key", ["--set", "=3"], ["--set '=3'", "empty key"]),
+    case("set-invalid-yaml-value", ["--set", "dx=[0.01"], ["--set 'dx=[0.01'", "not valid YAML"]),
+    case("unknown-variant", ["--variant", "nope"], ["--variant 'nope'", "not defined"]),
+    case("arch-not-a-choice", ["--arch", "tpu"], ["--arch", "tpu"]),
+    case("out-existing-directory", ["--out", "{tmp}/outdir"], ["--out", "outdir", "is a directory"],
+         files={"outdir/": None}),
+    case("out-without-h5-suffix", ["--out", "{tmp}/sub/run.txt"], ["--out", "run.txt", ".h5"]),
+    case("out-parent-is-a-file", ["--out", "{tmp}/plain.txt/run.h5"], ["--out", "plain.txt", "not a directory"],
+         files={"plain.txt": "not a directory\n"}),
+    case("unknown-flag", ["--bogus"], ["--bogus"]),
+    case("unknown-subcommand", ["frobnicate"], ["frobnicate"]),
+    case("run-without-config", ["run"], ["--config"]),
+    case("subcommand-not-available", ["render"], ["render", "not available"]),
+    case("info-without-input", ["info"], ["info"]),
+    case("info-missing-run-file", ["info", "{tmp}/nothere.h5"], ["nothere.h5"]),
+    case("info-not-hdf5", ["info", "{tmp}/fake.h5"], ["fake.h5", "not an HDF5 file"],
+         files={"fake.h5": "not hdf5\n"}),
+]
+
+
+def _snapshot(root: Path) -> dict:
+    return {str(p.relative_to(root)): (p.is_dir(), None if p.is_dir() else p.stat().st_size)
+            for p in root.rglob("*")}
+
+
+def _expand(args, tmp_path):
+    return [a.replace("{tmp}", str(tmp_path)) for a in args]
+
+
+def _error_lines(text: str) -> list[str]:
+    return [line for line in text.splitlines() if line.strip() and not line.startswith("[Taichi]")]
+
+
+@pytest.mark.parametrize("args, expect, files", CASES)
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(run_cli, tmp_path, args, expect, files):
+    for name, text in files.items():
+        if name.endswith("/"):
+            (tmp_path / name).mkdir()
+        else:
+            (tmp_path / name).write_text(text)
+    args = _expand(args, tmp_path)
+    command = args[0] if args and args[0] in ("run", "info", "render") else "run"
+    if command == "run" and "--config" not in args and args != ["run"]:
+        args = [*args, "--config", HYDROSTATIC]
+    if command == "run" and "--out" not in args:
+        args = [*args, "--out", str(tmp_path / "sub" / "run.h5")]
+    before = _snapshot(tmp_path)
+
+    proc = run_cli(*args, timeout=120)
+
+    lines = _error_lines(proc.stderr)
+    assert proc.returncode == 2, (proc.returncode, proc.stdout, proc.stderr)
+    assert len(lines) == 1, f"expected one line on stderr, got:\n{proc.stderr}"
+    assert proc.stderr.strip() == lines[0], f"stray output on stderr:\n{proc.stderr}"
+    line = lines[0]
+    assert line.startswith("taichi-sph: error: "), line
+    assert "Traceback" not in proc.stderr + proc.stdout
+    for text in expect:
+        assert text in line, f"{text!r} not in {line!r}"
+    assert "[Taichi]" not in proc.stdout + proc.stderr, "Taichi started before the input was validated"
+    # nothing written
+    assert not (tmp_path / "sub" / "run.h5").exists()
+    assert not (tmp_path / "sub").exists()
+    assert _snapshot(tmp_path) == before
+
+
+def test_check_valid_config_writes_nothing(run_cli, tmp_path):
+    out = tmp_path / "sub" / "run.h5"
+    proc = run_cli("--config", HYDROSTATIC, "--check", "--out", out, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "valid" in proc.stdout
+    assert "[Taichi]" not in proc.stdout + proc.stderr
+    assert not out.exists()
+    assert not (tmp_path / "sub").exists()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_check_small_config_file(run_cli, tmp_path):
+    (tmp_path / "small.yaml").write_text(GOOD_YAML)
+    before = _snapshot(tmp_path)
+    proc = run_cli("run", "--config", tmp_path / "small.yaml", "--check", "--out", tmp_path / "sub" / "run.h5",
+                   timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert _snapshot(tmp_path) == before
+
+
+def test_info_config_json(run_cli, tmp_path):
+    proc = run_cli("info", "--config", HYDROSTATIC, "--json", timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(proc.stdout)
+    assert data["mode"] == "isph"
+    assert data["dim"] == 2
+    assert data["dx"] == pytest.approx(0.01)
+    assert "[Taichi]" not in proc.stdout + proc.stderr
+
+
+def test_info_config_json_with_override(run_cli):
+    proc = run_cli("info", "--config", HYDROSTATIC, "--set", "dx=0.02", "--set", "isph.alpha=0", "--json",
+                   timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(proc.stdout)
+    assert data["dx"] == pytest.approx(0.02)
+    assert data["isph"]["alpha"] == 0
+
+
+def test_info_config_bad_override_exits_2(run_cli):
+    proc = run_cli("info", "--config", HYDROSTATIC, "--set", "isph.foo=1", "--json", timeout=120)
+    assert proc.returncode == 2
+    lines = _error_lines(proc.stderr)
+    assert len(lines) == 1 and "'isph.foo'" in lines[0], proc.stderr
+    assert proc.stdout == ""

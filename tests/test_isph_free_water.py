@@ -1,0 +1,137 @@
+"""Mode isph with eps = 1 (plain Navier-Stokes): PPE assembly against scipy, hydrostatic tank,
+dam break against Martin & Moyce (1952)."""
+
+import numpy as np
+import pytest
+
+from taichi_sph.io.hdf5 import RunFile
+
+from .conftest import ROOT
+
+DATA = ROOT / "tests" / "data"
+RHO, G = 1000.0, 9.81
+
+
+def _small_dambreak_config():
+    from taichi_sph.config import load_config
+
+    return load_config(data={
+        "mode": "isph", "dim": 2, "dx": 0.01, "end_time": 0.1, "dt": 0.002,
+        "tank": {"size": [0.3, 0.2]}, "water": [{"min": [0, 0], "max": [0.1, 0.15]}],
+        "isph": {"ppe": {"tolerance": 1e-10, "max_iterations": 5000}},
+    })
+
+
+def test_ppe_matrix_cg_matches_scipy(ti_cpu, tmp_path):
+    """The assembled PPE system solved by SparseCG equals scipy's direct sparse solve."""
+    import scipy.io
+    import scipy.sparse.linalg as spla
+
+    from taichi_sph.isph.solver import ISPHSolver
+    from taichi_sph.scene import build_scene
+
+    cfg = _small_dambreak_config()
+    solver = ISPHSolver(cfg, build_scene(cfg))
+    for _ in range(3):  # a few steps so that velocities and pressures are not trivial
+        solver.step(0.002)
+    solver.neighbour_search()
+    solver._k_density()
+    solver.dt[None] = 0.002
+    solver._k_predictor()
+    solver._k_assemble(solver.ppe.builder)
+    A = solver.ppe.build()
+    b = solver.b.to_numpy()[: solver.n_water]
+    x_cg, iters, res, ok = solver.ppe.solve(b, np.zeros_like(b))
+    assert ok and iters > 0
+    path = tmp_path / "A.mtx"
+    A.mmwrite(str(path))
+    As = scipy.io.mmread(str(path)).tocsr()
+    assert abs(As - As.T).max() <= 1e-12 * abs(As).max()  # symmetric, as CG needs
+    x_ref = spla.spsolve(As.tocsc(), b)
+    # Taichi's Matrix Market writer keeps 6 significant digits, so the matrix scipy sees differs from
+    # the solved one by ~1e-6 relative; with the PPE's condition number here (~1e1-1e2 after the
+    # Jacobi-like scaling of the Dirichlet rows) the solutions agree to ~1e-5: assert 1e-4.
+    assert np.linalg.norm(x_cg - x_ref) <= 1e-4 * np.linalg.norm(x_ref)
+    # the residual of the exact matrix, computed by the solver itself, meets the tolerance
+    assert res <= 1e-10
+    assert np.linalg.norm(As @ x_cg - b) <= 1e-4 * np.linalg.norm(b)
+
+
+def test_hydrostatic_tank_2d(run_cli, tmp_path):
+    """30 particles deep, 1 s: bottom pressure, stillness and volume.
+
+    Measured at this setting: bottom pressure +0.55 %, max speed 0.22 % of sqrt(g H), volume drift
+    +0.23 %. Tolerances are the acceptance bounds: 2 % (the O(dx / H) = 3 % surface-position error of
+    a particle method is halved by the half-layer surface pressure), 1 % of sqrt(g H), 0.5 %.
+    """
+    out = tmp_path / "h.h5"
+    r = run_cli("--config", "configs/hydrostatic.yaml", "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    H = 0.30
+    with RunFile(out) as rf:
+        f = rf.frame(-1)
+        water = rf.kind == 0
+        assert abs(rf.times[-1] - 1.0) < 1e-9
+        y = f["position"][water][:, -1]
+        p = f["pressure"][water]
+        bottom = y < y.min() + 0.5 * rf.dx
+        # extrapolate the bottom row's pressure to the tank floor (y = 0) hydrostatically
+        p_floor = np.mean(p[bottom] + RHO * G * y[bottom])
+        assert abs(p_floor / (RHO * G * H) - 1) < 0.02
+        # the whole profile, not only the bottom: interior particles within 2 % of rho g H
+        assert np.max(np.abs(p - RHO * G * (H - y))) < 0.02 * RHO * G * H
+        speed = np.linalg.norm(f["velocity"][water], axis=1)
+        assert speed.max() < 0.01 * np.sqrt(G * H)
+        d = rf.diagnostics()
+        drift = d["water_volume"][-1] / d["water_volume"][0] - 1
+        assert abs(drift) < 0.005
+        assert np.all(d["cg_residual"] <= 1e-8)
+
+
+def _reference(name):
+    rows = [line.strip().split(",") for line in (DATA / f"{name}.csv").read_text().splitlines()
+            if line.strip() and not line.startswith("#") and not line.startswith("T")]
+    return np.array(rows, float)
+
+
+def test_dambreak_front_martin_moyce(run_cli, tmp_path):
+    """2D dam break, column a = 0.1 m x 2a, dx = a / 20: surge front Z = z / a against T = t sqrt(2 g / a).
+
+    Front = the largest x of the water particles (leading particle centre). Measured at this
+    setting against both Martin & Moyce series: +13.6 % / +11.6 % at T = 1.2, then +6.3, +5.8, +3.7,
+    +2.9 and -1.4 % for T in [1.5, 3]. The experiment's front lags early on while the gate is pulled
+    (the simulation releases instantly), so the first point is held to 15 % and the rest to 10 %.
+    """
+    out = tmp_path / "db.h5"
+    r = run_cli("--config", "configs/dambreak.yaml", "--set", "end_time=0.3", "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    a = 0.1
+    with RunFile(out) as rf:
+        water = rf.kind == 0
+        T = rf.times * np.sqrt(2 * G / a)
+        Z = np.array([rf.field("position", i)[water & rf.field("active", i)][:, 0].max() / a
+                      for i in range(rf.n_frames)])
+    for name in ("martin_moyce_a1.125in_n2sq2", "martin_moyce_a2.25in_n2sq2"):
+        ref = _reference(name)
+        sel = (ref[:, 0] >= 1.0) & (ref[:, 0] <= 3.0)
+        err = np.interp(ref[sel, 0], T, Z) / ref[sel, 1] - 1
+        early = ref[sel, 0] < 1.5
+        assert np.all(np.abs(err[~early]) < 0.10), (name, err)
+        assert np.all(np.abs(err[early]) < 0.15), (name, err)
+    # the front advances monotonically once released
+    assert np.all(np.diff(Z[T > 0.5]) > -0.05)
+
+
+@pytest.mark.parametrize("gradient", ["corrected", "difference"])
+def test_dambreak_stays_stable_and_conserves_volume(run_cli, tmp_path, gradient):
+    """Violent free-surface flow: no blow-up, volume measure drift bounded (measured -3.0 % corrected,
+    -3.7 % difference at dx = a / 20 over 0.3 s; bound 6 %)."""
+    out = tmp_path / "db.h5"
+    r = run_cli("--config", "configs/dambreak.yaml", "--set", "end_time=0.3", "--set", f"isph.gradient={gradient}",
+                "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    with RunFile(out) as rf:
+        d = rf.diagnostics()
+        assert abs(d["water_volume"][-1] / d["water_volume"][0] - 1) < 0.06
+        # speeds stay physical: below 1.5 x the free-fall speed from the column top sqrt(2 g 2a)
+        assert d["max_speed"].max() < 1.5 * np.sqrt(2 * G * 0.2)
