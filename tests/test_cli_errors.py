@@ -201,3 +201,14 @@ def test_info_config_bad_override_exits_2(run_cli):
     lines = _error_lines(proc.stderr)
     assert len(lines) == 1 and "'isph.foo'" in lines[0], proc.stderr
     assert proc.stdout == ""
+
+
+def test_config_doc_is_current():
+    """docs/config.md is generated from the schema; a schema change must regenerate it."""
+    import subprocess
+    import sys
+
+    from .conftest import ROOT
+
+    r = subprocess.run([sys.executable, "tools/config_doc.py", "--check"], cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr

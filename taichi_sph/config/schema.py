@@ -43,6 +43,7 @@ class Box(Strict):
 
 
 class Output(Strict):
+    #: run file (HDF5); `--out` overrides it
     path: str = "out/run.h5"
     #: simulated seconds between frames
     every: PosFloat = 0.02
@@ -140,7 +141,9 @@ class Guard(Strict):
 
 
 class Config(Strict):
+    #: solver: isph (incompressible, PPE) or wcsph_biot (weakly compressible mixture)
     mode: Literal["isph", "wcsph_biot"] = "isph"
+    #: number of space dimensions
     dim: Literal[2, 3] = 2
     #: initial particle spacing (m)
     dx: PosFloat
@@ -156,16 +159,25 @@ class Config(Strict):
     threads: Optional[PosInt] = None
     #: gravity vector (m/s^2); default -9.81 along the last axis
     gravity: Optional[list[float]] = None
+    #: free text stored with the run
     description: str = ""
+    #: run file and frame interval
     output: Output = Output()
+    #: water properties
     fluid: Fluid = Fluid()
+    #: the tank (required)
     tank: Tank
     #: water blocks (m), each filled with particles on a lattice of spacing dx
     water: list[Box] = Field(min_length=1)
+    #: solid blocks of wall particles inside the tank (m)
     obstacles: list[Obstacle] = []
+    #: options of mode isph
     isph: ISPH = ISPH()
+    #: adaptive time-step limits (dt = auto)
     timestep: TimeStep = TimeStep()
+    #: neighbour-list capacity
     neighbours: Neighbours = Neighbours()
+    #: stability checks
     guard: Guard = Guard()
     #: named sets of dotted overrides applied by `--variant NAME`
     variants: dict[str, dict[str, object]] = {}
