@@ -30,9 +30,8 @@ def sigma(dim: int, h: float) -> float:
 
 
 @ti.func
-def w(r, h, dim: ti.template()):
-    """Kernel value W(r, h)."""
-    q = r / h
+def _sigma(h, dim: ti.template()):
+    """Normalisation sigma_d (same as `sigma`, inside kernels)."""
     s = 0.0
     if ti.static(dim == 1):
         s = 2.0 / (3.0 * h)
@@ -40,6 +39,14 @@ def w(r, h, dim: ti.template()):
         s = 10.0 / (7.0 * math.pi * h * h)
     else:
         s = 1.0 / (math.pi * h * h * h)
+    return s
+
+
+@ti.func
+def w(r, h, dim: ti.template()):
+    """Kernel value W(r, h)."""
+    q = r / h
+    s = _sigma(h, dim)
     val = 0.0
     if q < 1.0:
         val = s * (1.0 - 1.5 * q * q + 0.75 * q * q * q)
@@ -52,13 +59,7 @@ def w(r, h, dim: ti.template()):
 def dw_dr(r, h, dim: ti.template()):
     """Radial derivative dW/dr (<= 0)."""
     q = r / h
-    s = 0.0
-    if ti.static(dim == 1):
-        s = 2.0 / (3.0 * h)
-    elif ti.static(dim == 2):
-        s = 10.0 / (7.0 * math.pi * h * h)
-    else:
-        s = 1.0 / (math.pi * h * h * h)
+    s = _sigma(h, dim)
     val = 0.0
     if q < 1.0:
         val = s / h * (-3.0 * q + 2.25 * q * q)
