@@ -20,8 +20,6 @@ from .scene import build_scene, describe
 log = logging.getLogger("taichi_sph")
 
 DT_FIXED, DT_CFL, DT_VISCOUS, DT_FORCE, DT_MAX, DT_OUTPUT = range(6)
-DT_LIMIT_NAMES = {DT_FIXED: "fixed", DT_CFL: "cfl", DT_VISCOUS: "viscous", DT_FORCE: "force", DT_MAX: "max",
-                  DT_OUTPUT: "output"}
 DIAG_COLUMNS = ("time", "dt", "kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
                 "wall_seconds", "dt_limit", "free_surface", "collisions")
 

@@ -9,7 +9,6 @@ a unit normal pointing into the fluid (used by slip walls and the wall pressure 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -140,12 +139,3 @@ def build_scene(cfg) -> Scene:
 def describe(scene: Scene) -> str:
     parts = [f"{scene.count(k)} {name}" for k, name in KIND_NAMES.items() if scene.count(k)]
     return f"{scene.n} particles ({', '.join(parts)}), dim {scene.dim}, dx {scene.dx:g} m"
-
-
-def support_radius(dx: float) -> float:
-    return SUPPORT_FACTOR * dx
-
-
-def cells_estimate(scene: Scene) -> int:
-    r = support_radius(scene.dx)
-    return int(np.prod([math.ceil((b - a) / r) for a, b in zip(scene.lo, scene.hi)]))

@@ -3,7 +3,6 @@ names the offending key or file, and nothing written. Validation happens before 
 these subprocesses compile no kernels and finish in well under a second each."""
 
 import json
-import os
 from pathlib import Path
 
 import pytest

@@ -102,7 +102,6 @@ class ISPHSolver:
         self.collisions = ti.field(ti.i32, ())
         self.dt = ti.field(float, ())
         self.g = vec(self.g_np.tolist())
-        self._vec = vec
         self.particle_fields = [self.x, self.v, self.normal, self.p, self.eps, self.kind, self.ids, self.active]
 
         self.np_fp = np.float64 if _is_f64() else np.float32
@@ -240,7 +239,7 @@ class ISPHSolver:
                     rij = xi - self.x[j]
                     r = rij.norm()
                     if r > 0.0:
-                        f = terms.laplacian_weight(rij, r, self.h, self.eta2, self.dim)
+                        f = terms.laplacian_weight(r, self.h, self.eta2, self.dim)
                         vj = self.v[j]
                         rb_j = rb_i
                         nu_j = nu_i
@@ -281,7 +280,7 @@ class ISPHSolver:
                         r = rij.norm()
                         if r > 0.0:
                             gw = kernels.grad_w(rij, r, self.h, self.dim)
-                            f = terms.laplacian_weight(rij, r, self.h, self.eta2, self.dim)
+                            f = terms.laplacian_weight(r, self.h, self.eta2, self.dim)
                             if self.kind[j] == WALL:
                                 vj = terms.mirror_velocity(vi, self.normal[j], self.no_slip)
                                 div += self.mass * (vj - vi).dot(gw)
@@ -465,7 +464,6 @@ class ISPHSolver:
         nfree = 0.0
         for i in range(self.n):
             if self.solve_mask[i] == 1:
-                dt = self.dt[None]
                 u = self.v[i] / self.eps[i]
                 s2 = u.dot(u)
                 ke += 0.5 * self.mass * s2

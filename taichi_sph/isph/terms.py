@@ -10,8 +10,8 @@ from ..sph import kernels
 
 
 @ti.func
-def laplacian_weight(rij, r, h, eta2, dim: ti.template()):
-    """F_ij = rij . grad W_ij / (r^2 + eta^2), the pair factor of eq 14, 22 and 24."""
+def laplacian_weight(r, h, eta2, dim: ti.template()):
+    """F_ij = rij . grad W_ij / (r^2 + eta^2) = r dW/dr / (r^2 + eta^2), the pair factor of eq 14, 22, 24."""
     return kernels.dw_dr(r, h, dim) * r / (r * r + eta2)
 
 
