@@ -99,6 +99,9 @@ class ISPHSolver:
         self.grad_c = ti.Vector.field(dim, float, n)
         self.wall_acc = ti.field(float, n)
         self.wall_wsum = ti.field(float, n)
+        self.wet = ti.field(ti.i32, n)
+        self.dry_walls = self.g_abs > 0.0
+        self.up = vec((-self.g_np / max(self.g_abs, 1e-300)).tolist())
         self.collisions = ti.field(ti.i32, ())
         self.dt = ti.field(float, ())
         self.g = vec(self.g_np.tolist())
@@ -154,6 +157,36 @@ class ISPHSolver:
                     self.solve_mask[i] = 1
 
     @ti.kernel
+    def _k_wet(self):
+        """Dry walls. A wall particle of a vertical wall (|n . up| < 1/2) that no water particle within its
+        support reaches in height (z_water >= z_wall - 0.6 dx) stands in air above the waterline: it is
+        left out of every sum (number density, free-surface count, PPE, gradient, viscosity), as air is.
+        Counting it would fill the missing air above surface particles along a wall, most of all in a
+        corner where two walls rise above the water, so that those particles are not found free.
+        Floors, ceilings and obstacle tops (|n . up| >= 1/2) are always wet."""
+        for i in range(self.n):
+            if self.kind[i] == WALL:
+                w = 1
+                if ti.static(self.dry_walls):
+                    if ti.abs(self.normal[i].dot(self.up)) < 0.5:
+                        w = 0
+                self.wet[i] = w
+        if ti.static(self.dry_walls):
+            for i in range(self.n):
+                if self.solve_mask[i] == 1:
+                    xi = self.x[i]
+                    for k in range(self.grid.nbr_count[i]):
+                        j = self.grid.nbr[i, k]
+                        if self.kind[j] == WALL and self.wet[j] == 0:
+                            if (xi - self.x[j]).dot(self.up) >= -0.6 * self.dx:
+                                self.wet[j] = 1
+
+    @ti.func
+    def _present(self, j):
+        """Neighbour j takes part in the sums: water, or a wet wall particle."""
+        return self.kind[j] != WALL or self.wet[j] == 1
+
+    @ti.kernel
     def _k_density(self):
         """<rho_i> (eq 27), free-surface flag (eq 34) and the kernel-gradient correction L_i."""
         for i in range(self.n):
@@ -163,9 +196,12 @@ class ISPHSolver:
                 M = ti.Matrix.zero(float, self.dim, self.dim)
                 gc = ti.Vector.zero(float, self.dim)
                 n_water = 0
-                nb = self.grid.nbr_count[i]
-                for k in range(nb):
+                nb = 0
+                for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
+                    if not self._present(j):
+                        continue
+                    nb += 1
                     rij = xi - self.x[j]
                     r = rij.norm()
                     wsum += kernels.w(r, self.h, self.dim)
@@ -203,6 +239,8 @@ class ISPHSolver:
                 G = ti.Matrix.zero(float, self.dim, self.dim)
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
+                    if not self._present(j):
+                        continue
                     rij = xi - self.x[j]
                     r = rij.norm()
                     vj = self.v[j]
@@ -236,6 +274,8 @@ class ISPHSolver:
                 lap = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
+                    if not self._present(j):
+                        continue
                     rij = xi - self.x[j]
                     r = rij.norm()
                     if r > 0.0:
@@ -276,6 +316,8 @@ class ISPHSolver:
                     rhs = 0.0
                     for k in range(self.grid.nbr_count[i]):
                         j = self.grid.nbr[i, k]
+                        if not self._present(j):
+                            continue
                         rij = xi - self.x[j]
                         r = rij.norm()
                         if r > 0.0:
@@ -339,6 +381,8 @@ class ISPHSolver:
                 xi = self.x[i]
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
+                    if not self._present(j):
+                        continue
                     if self.kind[j] == WALL:
                         r = (xi - self.x[j]).norm()
                         wij = kernels.w(r, self.h, self.dim)
@@ -363,6 +407,8 @@ class ISPHSolver:
                 gp = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
+                    if not self._present(j):
+                        continue
                     rij = xi - self.x[j]
                     r = rij.norm()
                     if r > 0.0:
@@ -511,6 +557,7 @@ class ISPHSolver:
         t0 = _time.perf_counter()
         self.neighbour_search()
         t0 = self._tick("neighbours", t0)
+        self._k_wet()
         self._k_density()
         t0 = self._tick("density", t0)
         if self.turbulence:
@@ -560,6 +607,7 @@ class ISPHSolver:
     def initial_diagnostics(self) -> dict:
         """Neighbour search and density at t = 0 (for the first frame and the reference volume)."""
         self.neighbour_search()
+        self._k_wet()
         self._k_density()
         d = self._k_diagnostics().to_numpy()
         self.last = {"kinetic_energy": float(d[0]), "max_speed": float(d[1]), "water_volume": float(d[2]),
