@@ -105,7 +105,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     stepper = TimeStepper(cfg, solver.g_abs)
 
     writer = RunWriter(out_path, mode=cfg.mode, dim=cfg.dim, dx=cfg.dx, arch=be["arch"], config_yaml=resolved_yaml(cfg),
-                       kind=scene.kind, ids=scene.ids, code_version=code_version(),
+                       kind=scene.kind, ids=scene.ids, code_version=code_version(), markers=_markers_out(scene),
                        attrs={"precision": be["precision"], "particle_mass": solver.mass, "rho_w": solver.rho_w,
                               "n_water": solver.n_water, "support_radius": solver.re, "status": "running"})
     diag = {k: [] for k in DIAG_COLUMNS}
@@ -197,6 +197,14 @@ def land_on(t: float, dt: float, limit: int, target: float) -> tuple[float, int]
     if r < 2 * dt:
         return 0.5 * r, DT_OUTPUT
     return dt, limit
+
+
+def _markers_out(scene):
+    """Soil markers as stored under /markers (SPEC 8: position, porosity = eps0, d50), or None."""
+    m = scene.markers
+    if not m:
+        return None
+    return {"position": m["position"], "porosity": m["eps0"], "d50": m["d50"], "volume": m["volume"]}
 
 
 def _flush_diag(writer, diag):

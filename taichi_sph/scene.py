@@ -29,7 +29,7 @@ class Scene:
     lo: np.ndarray  # neighbour-grid box
     hi: np.ndarray
     tank_size: np.ndarray
-    markers: dict = field(default_factory=dict)
+    markers: dict = field(default_factory=dict)  # soil markers: position, eps0, d50, volume (M,)
 
     @property
     def n(self) -> int:
@@ -96,6 +96,91 @@ def obstacle_particles(box_min, box_max, dx):
     return pts, normal
 
 
+def marker_lattice(lo, hi, spacing, nodes: bool) -> np.ndarray:
+    """Marker points in [lo, hi]: cell centres, or nodes including faces and corners."""
+    if not nodes:
+        return lattice_in_box(lo, hi, spacing)
+    axes = []
+    for a, b in zip(lo, hi):
+        n = max(1, int(round((b - a) / spacing)))
+        axes.append(np.linspace(a, b, n + 1))
+    grids = np.meshgrid(*axes, indexing="ij")
+    return np.stack([g.ravel() for g in grids], axis=1)
+
+
+def region_bounds(reg, dim: int, tank_size, margin: float):
+    """Bounding box of a soil region, pushed `margin` into the walls on every side where it meets the
+    tank: the ground runs on into the wall, so water next to a wall keeps the ground's porosity
+    (markers stopping at the wall face would give eps = 1 along every wall, a free channel)."""
+    size = np.asarray(tank_size, float)
+    if reg.shape == "box":
+        lo, hi = np.asarray(reg.min, float), np.asarray(reg.max, float)
+    else:
+        lo = np.array([reg.toe[0]] + ([0.0] if dim == 3 else []) + [reg.bottom])
+        hi = np.array([reg.toe[1]] + ([size[1]] if dim == 3 else []) + [reg.top])
+    tol = 1e-9 * max(1.0, float(size.max()))
+    lo = np.where(lo <= tol, lo - margin, lo)
+    hi = np.where(hi >= size - tol, hi + margin, hi)
+    return lo, hi
+
+
+def inside_region(pts: np.ndarray, reg, dim: int, tank_size, margin: float = 0.0) -> np.ndarray:
+    """Mask of points inside a soil region (box or mound, with its extension into the walls), faces
+    included."""
+    tol = 1e-9
+    lo, hi = region_bounds(reg, dim, tank_size, margin)
+    mask = np.all((pts >= lo - tol) & (pts <= hi + tol), axis=1)
+    if reg.shape == "mound":
+        x = pts[:, 0]
+        z = np.maximum(pts[:, -1], reg.bottom)
+        frac = (z - reg.bottom) / (reg.top - reg.bottom)
+        left = reg.toe[0] + frac * (reg.crest[0] - reg.toe[0])
+        right = reg.toe[1] + frac * (reg.crest[1] - reg.toe[1])
+        left = np.where(left <= tol, left - margin, left)
+        right = np.where(right >= tank_size[0] - tol, right + margin, right)
+        mask &= (x >= left - tol) & (x <= right + tol)
+    return mask
+
+
+def build_markers(cfg) -> dict:
+    """Soil markers (seed 000 section 4): fixed reference points, never SPH particles. Each carries
+    its region's eps0 and D50 and the volume V_j of eq 32 (spacing^dim). A later region replaces the
+    markers of earlier ones inside it. Regions that meet the tank run on into its walls by the wall
+    thickness. Empty dict when the config has no soil."""
+    soil = cfg.soil
+    if not soil.regions:
+        return {}
+    dim = cfg.dim
+    s = soil.marker_spacing or cfg.dx
+    nodes = soil.lattice == "nodes"
+    size = np.asarray(cfg.tank.size, float)
+    margin = cfg.wall_layers() * cfg.dx
+    pos = np.zeros((0, dim))
+    eps0 = np.zeros(0)
+    d50 = np.zeros(0)
+    for reg in soil.regions:
+        lo, hi = region_bounds(reg, dim, size, 0.0)
+        pts = marker_lattice(lo, hi, s, nodes)
+        # the same lattice continued into the walls where the region meets them
+        elo, ehi = region_bounds(reg, dim, size, margin)
+        steps = [(b - a) / max(1, int(round((b - a) / s))) for a, b in zip(lo, hi)]
+        ext = []
+        for ax in range(dim):
+            below = pts[:, ax].min() - steps[ax] * np.arange(1, int(np.ceil((lo[ax] - elo[ax]) / steps[ax] - 1e-9)) + 1)
+            above = pts[:, ax].max() + steps[ax] * np.arange(1, int(np.ceil((ehi[ax] - hi[ax]) / steps[ax] - 1e-9)) + 1)
+            ext.append(np.concatenate([below[::-1], np.unique(pts[:, ax]), above]))
+        grids = np.meshgrid(*ext, indexing="ij")
+        pts = np.stack([g.ravel() for g in grids], axis=1)
+        pts = pts[inside_region(pts, reg, dim, size, margin)]
+        if len(pos):
+            keep = ~inside_region(pos, reg, dim, size, margin)
+            pos, eps0, d50 = pos[keep], eps0[keep], d50[keep]
+        pos = np.concatenate([pos, pts])
+        eps0 = np.concatenate([eps0, np.full(len(pts), reg.eps0)])
+        d50 = np.concatenate([d50, np.full(len(pts), reg.d50)])
+    return {"position": pos, "eps0": eps0, "d50": d50, "volume": np.full(len(pos), s**dim)}
+
+
 def remove_overlaps(keep: np.ndarray, others: np.ndarray, dist: float) -> np.ndarray:
     """Mask of `keep` points farther than `dist` from every point of `others`."""
     if len(others) == 0 or len(keep) == 0:
@@ -114,7 +199,8 @@ def build_scene(cfg) -> Scene:
 
     water = np.zeros((0, dim))
     for box in cfg.water:
-        pts = lattice_in_box(box.min, box.max, dx)
+        # water in ground of porosity eps fills its pores: spacing dx / eps^(1/dim), mass unchanged
+        pts = lattice_in_box(box.min, box.max, dx * box.porosity ** (-1.0 / dim))
         pts = pts[remove_overlaps(pts, water, 0.5 * dx)]
         water = np.concatenate([water, pts])
 
@@ -133,9 +219,13 @@ def build_scene(cfg) -> Scene:
     lo = -(layers + 1) * dx * np.ones(dim)
     hi = size + (layers + 1) * dx
     hi[-1] = size[-1] + max(0.5 * size[-1], 4 * r_e)
-    return Scene(dim=dim, dx=dx, position=position, kind=kind, normal=normal, lo=lo, hi=hi, tank_size=size)
+    return Scene(dim=dim, dx=dx, position=position, kind=kind, normal=normal, lo=lo, hi=hi, tank_size=size,
+                 markers=build_markers(cfg))
 
 
 def describe(scene: Scene) -> str:
     parts = [f"{scene.count(k)} {name}" for k, name in KIND_NAMES.items() if scene.count(k)]
-    return f"{scene.n} particles ({', '.join(parts)}), dim {scene.dim}, dx {scene.dx:g} m"
+    text = f"{scene.n} particles ({', '.join(parts)}), dim {scene.dim}, dx {scene.dx:g} m"
+    if scene.markers:
+        text += f", {len(scene.markers['position'])} soil markers"
+    return text

@@ -42,6 +42,71 @@ class Box(Strict):
         return self
 
 
+class WaterBlock(Box):
+    """A block of water particles (m)."""
+
+    #: fill the block at the density of water in ground of this porosity: lattice spacing
+    #: dx / porosity^(1/dim), so each particle keeps the mass rho_w dx^dim (seed 000 eq 33)
+    porosity: Annotated[float, Field(gt=0, le=1)] = 1.0
+
+
+class SoilRegion(Strict):
+    """A region of porous ground, filled with fixed soil markers (seed 000 section 4)."""
+
+    #: box: an axis-aligned block [min, max]; mound: a trapezoid in the plane of the first and the
+    #: vertical axis (toe at `bottom`, crest at `top`), across the whole tank along y in 3D
+    shape: Literal["box", "mound"] = "box"
+    #: box corners (m)
+    min: Optional[list[float]] = None
+    max: Optional[list[float]] = None
+    #: mound: [x_left, x_right] of its base and of its crest (m)
+    toe: Optional[list[float]] = None
+    crest: Optional[list[float]] = None
+    #: mound: heights of its base and of its crest (m)
+    bottom: float = 0.0
+    top: Optional[float] = None
+    #: intrinsic porosity eps0 of the ground
+    eps0: Annotated[float, Field(gt=0, lt=1)]
+    #: mean grain diameter D50 (m)
+    d50: PosFloat
+
+    @model_validator(mode="after")
+    def _shape_keys(self):
+        if self.shape == "box":
+            if self.min is None or self.max is None:
+                raise ValueError("a box region needs min and max")
+            Box(min=self.min, max=self.max)
+        else:
+            if self.toe is None or self.crest is None or self.top is None:
+                raise ValueError("a mound region needs toe, crest and top")
+            for key, pair in (("toe", self.toe), ("crest", self.crest)):
+                if len(pair) != 2 or not pair[1] > pair[0]:
+                    raise ValueError(f"{key} must be [x_left, x_right] with x_right > x_left")
+            if not self.top > self.bottom:
+                raise ValueError("top must exceed bottom")
+            if self.crest[0] < self.toe[0] or self.crest[1] > self.toe[1]:
+                raise ValueError("the crest must lie within the toe")
+        return self
+
+
+class Soil(Strict):
+    """Porous ground of mode isph: fixed soil markers give each water particle its porosity (eq 32)
+    and the drag coefficients a, b of eq 9c-d."""
+
+    #: the ground, as regions of markers; a later region replaces earlier ones where they overlap
+    regions: list[SoilRegion] = []
+    #: marker spacing (m); default dx
+    marker_spacing: Optional[PosFloat] = None
+    #: cells: markers at cell centres, the ground surface lies on the region's faces; nodes: markers on
+    #: the region's faces and corners too (the seed's 21 x 21 x 21 markers for a 20 cm cube at 1 cm),
+    #: which moves the surface half a spacing outwards
+    lattice: Literal["cells", "nodes"] = "cells"
+    #: linear (Ergun-type) drag constant alpha_c of eq 9c
+    alpha_c: PosFloat = 1000.0
+    #: quadratic drag constant beta_c of eq 9d
+    beta_c: NonNegFloat = 1.1
+
+
 class Output(Strict):
     #: run file (HDF5); `--out` overrides it
     path: str = "out/run.h5"
@@ -112,6 +177,9 @@ class ISPH(Strict):
     #: largest shift per step, as a fraction of dx
     shifting_max: Annotated[float, Field(gt=0, le=0.5)] = 0.1
     ppe: PPESolver = PPESolver()
+    #: particle motion inside the ground: pore (x moves with vD / eps, the physical reading of
+    #: eq 15) or darcy (x moves with vD, the seed's literal reading)
+    advection: Literal["pore", "darcy"] = "pore"
 
 
 class TimeStep(Strict):
@@ -168,9 +236,11 @@ class Config(Strict):
     #: the tank (required)
     tank: Tank
     #: water blocks (m), each filled with particles on a lattice of spacing dx
-    water: list[Box] = Field(min_length=1)
+    water: list[WaterBlock] = Field(min_length=1)
     #: solid blocks of wall particles inside the tank (m)
     obstacles: list[Obstacle] = []
+    #: porous ground (mode isph): soil-marker regions and drag constants
+    soil: Soil = Soil()
     #: options of mode isph
     isph: ISPH = ISPH()
     #: adaptive time-step limits (dt = auto)
@@ -215,6 +285,18 @@ def check(cfg: "Config") -> None:
             _need_len(box.min, d, f"{group}[{k}].min")
             _need_len(box.max, d, f"{group}[{k}].max")
             _inside(box, cfg.tank.size, f"{group}[{k}]")
+    for k, reg in enumerate(cfg.soil.regions):
+        key = f"soil.regions[{k}]"
+        if reg.shape == "box":
+            _need_len(reg.min, d, f"{key}.min")
+            _need_len(reg.max, d, f"{key}.max")
+            _inside(Box(min=reg.min, max=reg.max), cfg.tank.size, key)
+        else:
+            lo = [reg.toe[0]] + ([0.0] if d == 3 else []) + [reg.bottom]
+            hi = [reg.toe[1]] + ([cfg.tank.size[1]] if d == 3 else []) + [reg.top]
+            _inside(Box(min=lo, max=hi), cfg.tank.size, key)
+    if cfg.soil.marker_spacing is not None and cfg.soil.marker_spacing > 2 * cfg.dx:
+        _fail("soil.marker_spacing", f"must be at most 2 dx = {2 * cfg.dx} (markers must resolve the kernel)")
     if cfg.tank.periodic:
         _fail("tank.periodic", "periodic boundaries are not implemented yet; use slip walls")
     if min(cfg.tank.size) < 2 * cfg.dx:

@@ -28,6 +28,7 @@ from ..linalg.sparse_cg import SparseCGSolver
 from ..scene import WALL, WATER
 from ..sph import kernels
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
+from . import porosity as _porosity
 from . import terms
 
 log = logging.getLogger("taichi_sph")
@@ -62,7 +63,11 @@ class ISPHSolver:
         self.turbulence = cfg.fluid.turbulence == "smagorinsky"
         self.no_slip = cfg.tank.boundary == "no_slip"
         self.grad_mode = _GRAD[cfg.isph.gradient]
-        self.pore_advection = True
+        self.pore_advection = cfg.isph.advection == "pore"
+        # porous ground only when the scene has soil markers (ti.static: otherwise compiled out)
+        self.porous = bool(scene.markers)
+        self.alpha_c = cfg.soil.alpha_c
+        self.beta_c = cfg.soil.beta_c
         self.shifting = cfg.isph.shifting > 0
         self.shift_a = cfg.isph.shifting
         self.shift_max = cfg.isph.shifting_max * dx
@@ -84,6 +89,7 @@ class ISPHSolver:
         self.rho_n = ti.field(float, n)
         self.eps = ti.field(float, n)
         self.kcoef = ti.field(float, n)
+        self.d50 = ti.field(float, n)
         self.nu_t = ti.field(float, n)
         self.L = ti.Matrix.field(dim, dim, float, n)
         self.kind = ti.field(ti.i32, n)
@@ -118,6 +124,9 @@ class ISPHSolver:
         self.p.fill(0.0)
 
         self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.re, self.max_nb)
+        self.markers = None
+        if self.porous:
+            self.markers = _porosity.MarkerSet(scene.markers, dim, scene.lo, scene.hi, self.re)
         fp = ti.f64 if _is_f64() else ti.f32
         self.ppe = SparseCGSolver(max(self.n_water, 1), max(self.n_water, 1) * (self.max_nb + 1), fp,
                                   cfg.isph.ppe.tolerance, cfg.isph.ppe.max_iterations)
@@ -125,7 +134,7 @@ class ISPHSolver:
         self.removed_total = 0
         self.step_count = 0
         self.time = 0.0
-        self.timers = {k: 0.0 for k in ("neighbours", "density", "predictor", "ppe_assembly", "ppe_solve",
+        self.timers = {k: 0.0 for k in ("neighbours", "porosity", "density", "predictor", "ppe_assembly", "ppe_solve",
                                          "corrector", "diagnostics")}
         self.last = {}
 
@@ -196,24 +205,33 @@ class ISPHSolver:
                 M = ti.Matrix.zero(float, self.dim, self.dim)
                 gc = ti.Vector.zero(float, self.dim)
                 n_water = 0
-                nb = 0
+                nb = 0.0
+                # anti-pairing reference: the kernel at the spacing of water at this porosity,
+                # dx / eps^(1/dim) (the lattice spacing in free water)
+                w_ref = self.w_dx
+                if ti.static(self.porous and self.shifting):
+                    if self.eps[i] < 1.0:
+                        w_ref = kernels.w(self.dx * self.eps[i] ** (-1.0 / self.dim), self.h, self.dim)
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     if not self._present(j):
                         continue
-                    nb += 1
-                    rij = xi - self.x[j]
-                    r = rij.norm()
-                    wsum += kernels.w(r, self.h, self.dim)
-                    vj = self.mass / (self.eps[i] * self.rho_w)
+                    # a wall particle stands for water of mass eps_i m at the wall lattice: volume dx^d
+                    share = self.eps[i]
+                    vj = self.mass / self.rho_w
                     if self.kind[j] == WATER:
                         n_water += 1
+                        share = 1.0
                         vj = self.mass / (self.eps[j] * self.rho_w)
+                    nb += share
+                    rij = xi - self.x[j]
+                    r = rij.norm()
+                    wsum += share * kernels.w(r, self.h, self.dim)
                     if r > 0.0:
                         gw = kernels.grad_w(rij, r, self.h, self.dim)
                         M += vj * (-rij).outer_product(gw)
                         if ti.static(self.shifting):
-                            ratio = kernels.w(r, self.h, self.dim) / self.w_dx
+                            ratio = kernels.w(r, self.h, self.dim) / w_ref
                             gc += vj * (1.0 + 0.2 * ratio**4) * gw
                 self.rho_n[i] = self.mass * wsum / self.kernel_sum
                 if ti.static(self.shifting):
@@ -244,7 +262,7 @@ class ISPHSolver:
                     rij = xi - self.x[j]
                     r = rij.norm()
                     vj = self.v[j]
-                    vol = self.mass / (self.eps[i] * self.rho_w)
+                    vol = self.mass / self.rho_w
                     if self.kind[j] == WALL:
                         vj = terms.mirror_velocity(vi, self.normal[j], self.no_slip)
                     else:
@@ -260,7 +278,11 @@ class ISPHSolver:
 
     @ti.kernel
     def _k_predictor(self):
-        """v* = v + c (g/eps + nu_E lap v) (eq 19) with eq 22; k = c / rho_bar for the PPE."""
+        """Predictor (eq 19) with the drag implicit in the whole projection (SPEC 3 step 2):
+        c = eps dt / Cr, D = 1 + c (a + b |vD|),  v* = (vD + c (g / eps + nu_E lap vD)) / D  and the
+        PPE / corrector coefficient k = c / (D rho_bar), so that vD(n+1) = v* - k grad P equals
+        (vD + c (g / eps + nu_E lap vD) - c grad P / rho_bar) / D. Viscous term by eq 22. With
+        eps = 1: Cr = 1, a = b = 0, D = 1 (plain Navier-Stokes)."""
         dt = self.dt[None]
         for i in range(self.n):
             if self.solve_mask[i] == 1:
@@ -283,17 +305,26 @@ class ISPHSolver:
                         vj = self.v[j]
                         rb_j = rb_i
                         nu_j = nu_i
+                        m_j = eps_i * self.mass
                         if self.kind[j] == WALL:
                             vj = terms.mirror_velocity(vi, self.normal[j], self.no_slip)
                         else:
+                            m_j = self.mass
                             rb_j = self.eps[j] * self.rho_w
                             nu_j = self.nu / self.eps[j]
                             if ti.static(self.turbulence):
                                 nu_j += self.nu_t[j] / self.eps[j]
-                        lap += terms.variable_laplacian_pair(self.mass, rb_i, nu_i, rb_j, nu_j, f) * (vi - vj)
+                        lap += terms.variable_laplacian_pair(m_j, rb_i, nu_i, rb_j, nu_j, f) * (vi - vj)
                 c = eps_i * dt
-                self.vstar[i] = vi + c * (self.g / eps_i + lap)
-                self.kcoef[i] = c / rb_i
+                drag = 1.0
+                if ti.static(self.porous):
+                    if eps_i < 1.0:
+                        c /= _porosity.inertia_coefficient(eps_i)
+                        a = _porosity.linear_drag(eps_i, self.nu, self.d50[i], self.alpha_c)
+                        b = _porosity.quadratic_drag(eps_i, self.d50[i], self.beta_c)
+                        drag = 1.0 + c * (a + b * vi.norm())
+                self.vstar[i] = (vi + c * (self.g / eps_i + lap)) / drag
+                self.kcoef[i] = c / (drag * rb_i)
 
     @ti.kernel
     def _k_assemble(self, A: ti.types.sparse_matrix_builder()):
@@ -325,8 +356,9 @@ class ISPHSolver:
                             f = terms.laplacian_weight(r, self.h, self.eta2, self.dim)
                             if self.kind[j] == WALL:
                                 vj = terms.mirror_velocity(vi, self.normal[j], self.no_slip)
-                                div += self.mass * (vj - vi).dot(gw)
-                                K = -terms.variable_laplacian_pair(self.mass, rb_i, k_i, rb_i, k_i, f)
+                                m_w = eps_i * self.mass
+                                div += m_w * (vj - vi).dot(gw)
+                                K = -terms.variable_laplacian_pair(m_w, rb_i, k_i, rb_i, k_i, f)
                                 rhs += K * self.rho_w * self.g.dot(self.x[j] - xi)
                             else:
                                 div += self.mass * (self.vstar[j] - vi).dot(gw)
@@ -415,12 +447,14 @@ class ISPHSolver:
                         gw = kernels.grad_w(rij, r, self.h, self.dim)
                         pj = self.p[j]
                         rb_j = rb_i
+                        m_j = self.eps[i] * self.mass
                         if self.kind[j] != WALL:
                             rb_j = self.eps[j] * self.rho_w
+                            m_j = self.mass
                         if ti.static(self.grad_mode == GRAD_SYMMETRIC):
-                            gp += self.mass * (pj / (rb_j * rb_j) + pi / (rb_i * rb_i)) * gw
+                            gp += m_j * (pj / (rb_j * rb_j) + pi / (rb_i * rb_i)) * gw
                         else:
-                            gp += self.mass / rb_j * (pj - pi) * gw
+                            gp += m_j / rb_j * (pj - pi) * gw
                 if ti.static(self.grad_mode == GRAD_SYMMETRIC):
                     gp *= rb_i
                 if ti.static(self.grad_mode == GRAD_CORRECTED):
@@ -553,10 +587,17 @@ class ISPHSolver:
                                    time=self.time, quantity="neighbour count",
                                    particles=[exc.particle_id]) from None
 
+    def update_porosity(self):
+        """eps and D50 of every water particle from the soil markers (eq 32); nothing without soil."""
+        if self.porous:
+            self.markers.porosity(self.x, self.solve_mask, self.n, self.eps, self.d50)
+
     def step(self, dt: float) -> dict:
         t0 = _time.perf_counter()
         self.neighbour_search()
         t0 = self._tick("neighbours", t0)
+        self.update_porosity()
+        t0 = self._tick("porosity", t0)
         self._k_wet()
         self._k_density()
         t0 = self._tick("density", t0)
@@ -607,6 +648,7 @@ class ISPHSolver:
     def initial_diagnostics(self) -> dict:
         """Neighbour search and density at t = 0 (for the first frame and the reference volume)."""
         self.neighbour_search()
+        self.update_porosity()
         self._k_wet()
         self._k_density()
         d = self._k_diagnostics().to_numpy()
@@ -624,13 +666,16 @@ class ISPHSolver:
         kind = self.kind.to_numpy()[:n][order]
         rho = self.rho_n.to_numpy()[:n][order]
         rho = np.where(kind == WATER, rho, self.rho_w)
-        return {
+        out = {
             "position": self.x.to_numpy()[:n][order],
             "velocity": self.v.to_numpy()[:n][order],
             "pressure": self.p.to_numpy()[:n][order],
             "density": rho,
             "active": self.active.to_numpy()[:n][order].astype(bool),
         }
+        if self.porous:
+            out["porosity"] = np.where(kind == WATER, self.eps.to_numpy()[:n][order], 1.0)
+        return out
 
     def max_speed_bound(self) -> float:
         if self.cfg.guard.max_speed is not None:

@@ -1,0 +1,124 @@
+"""Porosity of water particles from fixed soil markers (seed 000 section 4, eq 32) and the
+coefficients of the unified momentum equation (eq 9a-d).
+
+eq 32:  eps_i = max(min(1, 2 - 2 S_i), eps0_i),  S_i = sum_{j in soil} W_ij V_j,
+with V_j the marker volume. Beyond the seed, every marker carries its own eps0 and D50; at a water
+particle they are the kernel-weighted means sum_j W_ij V_j q_j / S_i of the markers around it, so
+layered ground (armour over core) works. Markers never move: they are binned and sorted into cells
+once, at construction; each step only the sums over the markers near each particle are taken.
+"""
+
+import numpy as np
+import taichi as ti
+
+from ..sph import kernels
+from ..sph.grid import NeighbourGrid
+
+
+@ti.func
+def inertia_coefficient(eps):
+    """Cr(eps) = 1 + 0.34 (1 - eps) / eps (eq 9a): added mass of the grains."""
+    return 1.0 + 0.34 * (1.0 - eps) / eps
+
+
+@ti.func
+def linear_drag(eps, nu, d50, alpha_c):
+    """a(eps) = alpha_c nu_w (1 - eps)^2 / (eps^3 D50^2) (eq 9c), 1/s."""
+    return alpha_c * nu * (1.0 - eps) ** 2 / (eps**3 * d50 * d50)
+
+
+@ti.func
+def quadratic_drag(eps, d50, beta_c):
+    """b(eps) = beta_c (1 - eps) / (eps^3 D50) (eq 9d), 1/m."""
+    return beta_c * (1.0 - eps) / (eps**3 * d50)
+
+
+def linear_drag_np(eps, nu, d50, alpha_c):
+    return alpha_c * nu * (1.0 - eps) ** 2 / (eps**3 * d50**2)
+
+
+def quadratic_drag_np(eps, d50, beta_c):
+    return beta_c * (1.0 - eps) / (eps**3 * d50)
+
+
+def terminal_darcy_velocity(eps, nu, d50, alpha_c=1000.0, beta_c=1.1, g=9.81, gradient=1.0):
+    """Steady Darcy velocity of water driven by gravity through uniform ground: the positive root
+    of a vD + b vD^2 = (g / eps) * gradient (eq 8 with d/dt = 0, uniform flow, no pressure gradient
+    for gradient = 1)."""
+    a = linear_drag_np(eps, nu, d50, alpha_c)
+    b = quadratic_drag_np(eps, d50, beta_c)
+    rhs = g / eps * gradient
+    if b == 0.0:
+        return rhs / a
+    return (-a + np.sqrt(a * a + 4.0 * b * rhs)) / (2.0 * b)
+
+
+@ti.data_oriented
+class MarkerSet:
+    """Fixed soil markers in cell order, and the porosity kernel that reads them."""
+
+    def __init__(self, markers: dict, dim: int, lo, hi, support_radius: float):
+        self.dim = dim
+        self.m = m = len(markers["position"])
+        self.re = support_radius
+        self.h = 0.5 * support_radius
+        self.position = ti.Vector.field(dim, float, m)
+        self.eps0 = ti.field(float, m)
+        self.d50 = ti.field(float, m)
+        self.volume = ti.field(float, m)
+        self.position.from_numpy(np.asarray(markers["position"]))
+        self.eps0.from_numpy(np.asarray(markers["eps0"]))
+        self.d50.from_numpy(np.asarray(markers["d50"]))
+        self.volume.from_numpy(np.asarray(markers["volume"]))
+        # markers outside the particle grid box cannot be reached by any particle: the grid drops them
+        self.grid = NeighbourGrid(m, dim, lo, hi, support_radius, 1)
+        active = ti.field(ti.i32, m)
+        active.fill(1)
+        self.grid.sort(self.position, active, m)
+        for f in (self.position, self.eps0, self.d50, self.volume):
+            self.grid.reorder(f, m)
+        self.ncell = self.grid.ncell
+        self._lo = [float(v) for v in lo]
+        self.cell_size = float(support_radius)
+
+    @ti.kernel
+    def porosity(self, x: ti.template(), mask: ti.template(), n: ti.i32, eps: ti.template(),
+                 d50: ti.template()):
+        """eps_i (eq 32) and the local D50 for the first n particles with mask 1; eps = 1 elsewhere."""
+        for i in range(n):
+            e = 1.0
+            dloc = 1.0
+            if mask[i] == 1:
+                xi = x[i]
+                cc = ti.Vector.zero(ti.i32, ti.static(self.dim))
+                inside = 1
+                for d in ti.static(range(self.dim)):
+                    c = ti.cast(ti.floor((xi[d] - ti.static(self._lo[d])) / ti.static(self.cell_size)), ti.i32)
+                    if c < -1 or c > ti.static(self.ncell[d]):
+                        inside = 0
+                    cc[d] = c
+                s = 0.0
+                se = 0.0
+                sd = 0.0
+                if inside == 1:
+                    for off in ti.static(ti.grouped(ti.ndrange(*([(-1, 2)] * self.dim)))):
+                        ok = 1
+                        lin = 0
+                        for d in ti.static(range(self.dim)):
+                            nd = cc[d] + off[d]
+                            if nd < 0 or nd >= ti.static(self.ncell[d]):
+                                ok = 0
+                            lin = lin * ti.static(self.ncell[d]) + nd
+                        if ok == 1:
+                            for j in range(self.grid.cell_start[lin], self.grid.cell_start[lin + 1]):
+                                r = (xi - self.position[j]).norm()
+                                if r < ti.static(self.re):
+                                    wv = kernels.w(r, ti.static(self.h), ti.static(self.dim)) * self.volume[j]
+                                    s += wv
+                                    se += wv * self.eps0[j]
+                                    sd += wv * self.d50[j]
+                if s > 0.0:
+                    e = ti.max(ti.min(1.0, 2.0 - 2.0 * s), se / s)
+                    dloc = sd / s
+            eps[i] = e
+            d50[i] = dloc
