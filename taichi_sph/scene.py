@@ -96,6 +96,27 @@ def obstacle_particles(box_min, box_max, dx):
     return pts, normal
 
 
+def porous_lattice(lo, hi, dx, porosity: float) -> np.ndarray:
+    """Cell-centred lattice filling [lo, hi] with water at the given porosity: about
+    porosity * volume / dx^dim points. Per axis the count is rounded down or up (spacing near
+    dx / porosity^(1/dim)), choosing the combination whose total is closest to that target."""
+    if porosity >= 1.0:
+        return lattice_in_box(lo, hi, dx)
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    dim = len(lo)
+    s = dx * porosity ** (-1.0 / dim)
+    target = porosity * np.prod(hi - lo) / dx**dim
+    choices = [sorted({max(1, int(np.floor((b - a) / s))), max(1, int(np.ceil((b - a) / s)))}) for a, b in zip(lo, hi)]
+    best = None
+    for counts in np.array(np.meshgrid(*choices, indexing="ij")).reshape(dim, -1).T:
+        err = abs(np.prod(counts) - target)
+        if best is None or err < best[0]:
+            best = (err, counts)
+    axes = [a + (np.arange(n) + 0.5) * (b - a) / n for a, b, n in zip(lo, hi, best[1])]
+    grids = np.meshgrid(*axes, indexing="ij")
+    return np.stack([g.ravel() for g in grids], axis=1)
+
+
 def marker_lattice(lo, hi, spacing, nodes: bool) -> np.ndarray:
     """Marker points in [lo, hi]: cell centres, or nodes including faces and corners."""
     if not nodes:
@@ -200,7 +221,7 @@ def build_scene(cfg) -> Scene:
     water = np.zeros((0, dim))
     for box in cfg.water:
         # water in ground of porosity eps fills its pores: spacing dx / eps^(1/dim), mass unchanged
-        pts = lattice_in_box(box.min, box.max, dx * box.porosity ** (-1.0 / dim))
+        pts = porous_lattice(box.min, box.max, dx, box.porosity)
         pts = pts[remove_overlaps(pts, water, 0.5 * dx)]
         water = np.concatenate([water, pts])
 

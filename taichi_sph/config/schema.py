@@ -65,8 +65,8 @@ class SoilRegion(Strict):
     #: mound: heights of its base and of its crest (m)
     bottom: float = 0.0
     top: Optional[float] = None
-    #: intrinsic porosity eps0 of the ground
-    eps0: Annotated[float, Field(gt=0, lt=1)]
+    #: intrinsic porosity eps0 of the ground (1: no ground, the porous terms vanish)
+    eps0: Annotated[float, Field(gt=0, le=1)]
     #: mean grain diameter D50 (m)
     d50: PosFloat
 

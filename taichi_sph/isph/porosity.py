@@ -53,6 +53,16 @@ def terminal_darcy_velocity(eps, nu, d50, alpha_c=1000.0, beta_c=1.1, g=9.81, gr
     return (-a + np.sqrt(a * a + 4.0 * b * rhs)) / (2.0 * b)
 
 
+def lattice_table(dim: int, n: int = 96, eps_min: float = 0.05) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For water in ground of porosity eps (pore lattice of spacing dx eps^(-1/dim)), tabulated on n
+    porosities in [eps_min, 1]: the lattice kernel sum K(eps) and the lattice neighbour count
+    N(eps). Number densities are divided by K(eps_i), so water at rest on its pore lattice has
+    <rho> = eps rho_w exactly; the free-surface count threshold is N_surf N(eps) / N(1)."""
+    eps = np.linspace(eps_min, 1.0, n)
+    vals = [kernels.lattice_kernel_sum(dim, e ** (-1.0 / dim)) for e in eps]
+    return eps, np.array([v[0] for v in vals]), np.array([float(v[1]) for v in vals])
+
+
 @ti.data_oriented
 class MarkerSet:
     """Fixed soil markers in cell order, and the porosity kernel that reads them."""

@@ -113,3 +113,17 @@ def lattice_sums(dim: int, support_factor: float = SUPPORT_FACTOR) -> dict:
     grad0 = dw_dr_np(rr, h, dim) * (-p[:, 0]) / rr
     g = float((p[:, 0] * grad0).sum())
     return {"neighbours": count, "kernel_sum": s, "gradient_moment": g}
+
+
+def lattice_kernel_sum(dim: int, spacing: float, support_factor: float = SUPPORT_FACTOR) -> tuple[float, int]:
+    """Kernel sum S = sum_j W_ij s^d (self included) and neighbour count (self excluded) over a
+    square/cubic lattice of spacing s (in units of the particle spacing dx; h = support_factor / 2 as
+    everywhere). s = 1 gives lattice_sums' values; s > 1 is water spread through ground of porosity
+    eps = s^-d."""
+    h = support_factor / 2.0
+    n = int(math.ceil(support_factor / spacing)) + 1
+    rng = np.arange(-n, n + 1, dtype=float) * spacing
+    grids = np.meshgrid(*([rng] * dim), indexing="ij")
+    r = np.linalg.norm(np.stack([g.ravel() for g in grids], axis=1), axis=1)
+    r = r[r < support_factor]
+    return float(w_np(r, h, dim).sum() * spacing**dim), int(len(r) - 1)
