@@ -45,7 +45,16 @@ def _parser() -> argparse.ArgumentParser:
     i.add_argument("--variant")
     i.add_argument("--json", action="store_true", help="machine-readable output")
 
-    for name in ("render", "plot", "sweep", "resume", "bench", "validate"):
+    from .render.command import add_arguments as _render_arguments
+
+    rd = sub.add_parser("render", help="PNG pictures and MP4/GIF movies of a run (offscreen)")
+    _render_arguments(rd)
+
+    pl = sub.add_parser("plot", help="PNG plots of the diagnostics and probes over time")
+    pl.add_argument("run_file", help="run file (HDF5)")
+    pl.add_argument("--out", help="folder for the plots (default: beside the run file)")
+
+    for name in ("sweep", "resume", "bench", "validate"):
         s = sub.add_parser(name, help="not available in this version")
         s.add_argument("args", nargs=argparse.REMAINDER)
     return p
@@ -65,6 +74,14 @@ def main(argv=None) -> int:
             return _cmd_run(args)
         if args.command == "info":
             return _cmd_info(args)
+        if args.command == "render":
+            from .render.command import run_command
+
+            return run_command(args)
+        if args.command == "plot":
+            from .plot import run_command as plot_command
+
+            return plot_command(args)
         raise InputError(f"'{args.command}' is not available in this version")
     except InputError as exc:
         print(f"taichi-sph: error: {exc}", file=sys.stderr)
@@ -123,6 +140,7 @@ def _cmd_info(args) -> int:
         try:
             with RunFile(args.run_file) as rf:
                 data = rf.summary()
+                data.update(run_file_overview(rf, data))
         except RunFileError as exc:
             raise InputError(str(exc)) from None
     else:
@@ -132,6 +150,48 @@ def _cmd_info(args) -> int:
     else:
         _print_tree(data)
     return 0
+
+
+def run_file_overview(rf, summary: dict) -> dict:
+    """What `info` adds to a run file's summary: the config in short, each probe's definition, and
+    where the wall time went."""
+    import yaml
+
+    out: dict = {}
+    try:
+        cfg = yaml.safe_load(rf.config_yaml) or {}
+    except yaml.YAMLError:
+        cfg = {}
+    if isinstance(cfg, dict) and cfg:
+        out["config"] = {
+            "description": cfg.get("description", ""),
+            "end_time": cfg.get("end_time"),
+            "dt": cfg.get("dt"),
+            "output_every": (cfg.get("output") or {}).get("every"),
+            "tank_size": (cfg.get("tank") or {}).get("size"),
+            "water_blocks": len(cfg.get("water") or []),
+            "obstacles": len(cfg.get("obstacles") or []),
+            "probes": len(cfg.get("probes") or []),
+            "images_every": ((cfg.get("output") or {}).get("images") or {}).get("every"),
+        }
+    group = rf.h5.get("probes")
+    if group is not None:
+        probes = {}
+        for name, info in summary["probes"].items():
+            attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in group[name].attrs.items()}
+            probes[name] = {**info, **{k: (v.tolist() if hasattr(v, "tolist") else v)
+                                       for k, v in attrs.items() if k != "units"}}
+        out["probes"] = probes
+    a = rf.attrs
+    timings = {k: a[k] for k in ("status", "steps", "wall_seconds", "setup_seconds", "step_seconds", "mipps")
+               if k in a}
+    if "phase_seconds" in a:
+        try:
+            timings["phase_seconds"] = json.loads(a["phase_seconds"])
+        except (TypeError, ValueError):
+            pass
+    out["timings"] = timings
+    return out
 
 
 def _print_tree(data, indent=0):

@@ -29,4 +29,7 @@ def features(cfg) -> dict:
             "ppe_max_iterations": cfg.isph.ppe.max_iterations,
         },
         "output": {"path": cfg.output.path, "every": cfg.output.every},
+        "probes": {p.name: {"type": p.type, "every": p.every or cfg.output.every} for p in cfg.probes},
+        "images": (None if cfg.output.images is None else
+                   {"every": cfg.output.images.every, "field": cfg.output.images.field}),
     }

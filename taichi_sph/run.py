@@ -110,12 +110,15 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                               "n_water": solver.n_water, "support_radius": solver.re, "status": "running"})
     diag = {k: [] for k in DIAG_COLUMNS}
     summary = {"out": str(out_path), "arch": be["arch"], "steps": 0, "status": "running"}
+    extras = RunExtras(cfg, writer, out_path, scene.kind, solver.mass, solver.rho_w)
     progress_bar = Progress(cfg.end_time, progress)
     wall0 = _time.perf_counter()
     step_wall = 0.0
     try:
         first = solver.initial_diagnostics()
-        writer.write_frame(0.0, solver.fields_by_id())
+        fields0 = solver.fields_by_id()
+        extras.after_step(0.0, lambda: fields0)
+        extras.after_frame(writer.write_frame(0.0, fields0), 0.0, fields0)
         summary["compile_and_setup_seconds"] = _time.perf_counter() - t_compile
         volume0 = first["water_volume"]
         every = cfg.output.every
@@ -151,8 +154,10 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                     f"step {solver.step_count}, t = {t:.6g} s: speed {last['max_speed']:.4g} m/s exceeds the bound "
                     f"{speed_bound:.4g} m/s (guard.max_speed) at particle id {pid}", step=solver.step_count, time=t,
                     quantity="speed", particles=[pid])
+            fields = extras.after_step(t, solver.fields_by_id)
             if t >= next_out - 1e-9 * every:
-                writer.write_frame(t, solver.fields_by_id())
+                fields = fields if fields is not None else solver.fields_by_id()
+                extras.after_frame(writer.write_frame(t, fields), t, fields)
                 _flush_diag(writer, diag)
                 while next_out <= t + 1e-9 * every:
                     next_out += every
@@ -173,6 +178,8 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     finally:
         progress_bar.close()
         _flush_diag(writer, diag)
+        extras.before_close()
+        writer.set_attrs(setup_seconds=summary.get("compile_and_setup_seconds"), phase_seconds=dict(solver.timers))
         wall = _time.perf_counter() - wall0
         steps = solver.step_count
         psps = solver.n_water * steps / step_wall if step_wall > 0 else 0.0
@@ -182,6 +189,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                          wall_seconds=wall, step_seconds=step_wall, mipps=psps / 1e6,
                          removed_particles=solver.removed_total)
         writer.close()
+        extras.after_close(summary["status"])
     if volume0 > 0:
         summary["volume_drift"] = last["water_volume"] / volume0 - 1.0
     return summary
@@ -218,3 +226,89 @@ def _fastest_particle(solver) -> int:
     f = solver.fields_by_id()
     speed = np.linalg.norm(f["velocity"], axis=1)
     return int(np.nanargmax(np.where(np.isfinite(speed), speed, np.inf)))
+
+
+def probe_arrays(fields: dict, kind: np.ndarray, mass: float, rho_w: float) -> dict:
+    """Host arrays for `probes`: frame fields (by id) plus kind and the bulk volume m / (eps rho_w)."""
+    arrays = dict(fields, kind=kind)
+    volume = np.full(len(kind), mass / rho_w)
+    if "porosity" in fields:
+        eps = np.asarray(fields["porosity"], dtype=float)
+        volume = volume / np.where(eps > 0, eps, 1.0)
+    arrays["volume"] = volume
+    return arrays
+
+
+class RunExtras:
+    """What a run writes besides frames and diagnostics: probes (sampled when due, to the run file
+    and <run>.probes.csv), pictures while it goes (output.images) and, whatever the end, the XDMF
+    sidecar of the frames written. None of them can stop the simulation: failures are logged."""
+
+    def __init__(self, cfg, writer, out_path, kind, mass: float, rho_w: float):
+        from .io.hdf5 import unit_for
+        from .io.probe_csv import probe_csv_path
+
+        self.out_path = Path(out_path)
+        self.kind = np.asarray(kind)
+        self.mass, self.rho_w = float(mass), float(rho_w)
+        self.recorder = None
+        self.spooler = None
+        csv_path = probe_csv_path(self.out_path)
+        if cfg.probes:
+            from .probes import ProbeRecorder, ProbeSet
+
+            self.recorder = ProbeRecorder(ProbeSet(cfg.probes, cfg.dim, cfg.dx, cfg.output.every), writer, csv_path)
+        elif csv_path.exists():
+            csv_path.unlink()  # a stale table of an earlier run with this name
+        if cfg.output.images is not None:
+            from .render.during_run import ImageSpooler
+
+            f = writer.file
+            markers = np.asarray(f["markers/position"][()]) if "markers/position" in f else None
+            self.spooler = ImageSpooler(cfg.output.images, self.out_path, dim=cfg.dim, dx=cfg.dx, kind=self.kind,
+                                        units={}, markers=markers)
+            self._unit_for = lambda name: unit_for(name, cfg.dim)
+
+    def after_step(self, t: float, fetch):
+        """Sample the probes due at t; returns the fetched fields (None when nothing was due)."""
+        if self.recorder is None:
+            return None
+        due = self.recorder.due(t)
+        if not due:
+            return None
+        fields = fetch()
+        self.recorder.record(t, probe_arrays(fields, self.kind, self.mass, self.rho_w), due)
+        return fields
+
+    def after_frame(self, index: int, t: float, fields: dict) -> None:
+        if self.recorder is not None:
+            self.recorder.flush()
+        if self.spooler is not None and self.spooler.due(t):
+            try:
+                self.spooler.units = {k: self._unit_for(k) for k in fields}
+                self.spooler.add(index, t, fields)
+            except Exception as exc:  # noqa: BLE001  (pictures never stop a run)
+                self.spooler.failed = True
+                log.warning("output.images: no more pictures (%s)", exc)
+
+    def before_close(self) -> None:
+        if self.recorder is not None:
+            try:
+                self.recorder.close()
+            except Exception as exc:  # noqa: BLE001
+                log.warning("probes: last samples not written (%s)", exc)
+
+    def after_close(self, status: str) -> None:
+        from .io.xdmf import write_xdmf
+
+        try:
+            write_xdmf(self.out_path, markers=True)
+        except Exception as exc:  # noqa: BLE001  (the run file itself is complete)
+            log.warning("XDMF sidecar not written: %s", exc)
+        if self.spooler is not None:
+            try:
+                self.spooler.finish(wait=status != "interrupted")
+                if self.spooler.count and not self.spooler.failed:
+                    log.info("%d picture(s) in %s", self.spooler.count, self.spooler.out_dir)
+            except Exception as exc:  # noqa: BLE001
+                log.warning("output.images: %s", exc)

@@ -114,6 +114,53 @@ class Output(Strict):
     every: PosFloat = 0.02
     #: HDF5 compression of frame datasets
     compression: Literal["none", "gzip", "lzf"] = "none"
+    #: pictures rendered while the run goes (PyVista, in a separate process); none by default
+    images: Optional[Images] = None
+
+
+#: particle fields a picture made during a run can be coloured by
+ImageField = Literal["speed", "pressure", "density", "kind", "porosity", "velocity_x", "velocity_y", "velocity_z"]
+#: a name usable as an HDF5 group and a CSV column in numpy and pandas
+ProbeName = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", max_length=64)]
+
+
+class Images(Strict):
+    """Pictures while the run goes: at the first frame at or after every `every` seconds the run saves
+    that frame's arrays and a separate renderer process draws <run>_images/<field>_<frame>.png (the
+    simulation never waits for it and is never affected when rendering fails). Needs the `render` extra."""
+
+    #: simulated seconds between pictures (at least output.every; pictures are made from frames)
+    every: PosFloat
+    #: particle field that colours the particles: speed, pressure, density, kind, porosity, velocity_x|y|z
+    field: ImageField = "speed"
+    #: camera preset (auto: front in 2D, iso in 3D)
+    camera: Literal["auto", "iso", "front", "top", "side"] = "auto"
+    #: wall particles: hidden, translucent or drawn
+    walls: Literal["hide", "translucent", "show"] = "translucent"
+    #: picture size in pixels [width, height]; rounded up to multiples of 16 so that videos encode cleanly
+    size: list[PosInt] = [800, 608]
+    #: colour range [lo, hi] in the field's unit; default: automatic for each picture
+    range: Optional[list[float]] = None
+
+
+class Probe(Strict):
+    """A gauge sampled during the run, written to /probes/<name>/time|value of the run file and to
+    <run>.probes.csv. See docs/output.md for how each type is computed."""
+
+    #: unique name (letters, digits and '_', not starting with a digit): the HDF5 group and the CSV
+    #: column (a velocity probe's columns are <name>_x, <name>_y[, <name>_z])
+    name: ProbeName
+    #: pressure: SPH (Shepard) pressure of the water at `point` (Pa); water_level: elevation of the
+    #: water surface on the vertical line that rises from `point` (m); water_volume: water inside
+    #: `box` (m^3, m^2 in 2D); velocity: mean velocity of the water inside `box` (m/s, dim components)
+    type: Literal["pressure", "water_level", "water_volume", "velocity"]
+    #: location (m), dim values, inside the tank (types pressure and water_level)
+    point: Optional[list[float]] = None
+    #: region (m), inside the tank (types water_volume and velocity)
+    box: Optional[Box] = None
+    #: simulated seconds between samples (default: output.every); sampled at the first step at or
+    #: after each multiple, and at t = 0
+    every: Optional[PosFloat] = None
 
 
 class Fluid(Strict):
@@ -231,6 +278,8 @@ class Config(Strict):
     description: str = ""
     #: run file and frame interval
     output: Output = Output()
+    #: gauges sampled during the run (pressure at a point, water level, water volume or mean velocity in a box)
+    probes: list[Probe] = []
     #: water properties
     fluid: Fluid = Fluid()
     #: the tank (required)
@@ -297,6 +346,8 @@ def check(cfg: "Config") -> None:
             _inside(Box(min=lo, max=hi), cfg.tank.size, key)
     if cfg.soil.marker_spacing is not None and cfg.soil.marker_spacing > 2 * cfg.dx:
         _fail("soil.marker_spacing", f"must be at most 2 dx = {2 * cfg.dx} (markers must resolve the kernel)")
+    _check_probes(cfg)
+    _check_images(cfg)
     if cfg.tank.periodic:
         _fail("tank.periodic", "periodic boundaries are not implemented yet; use slip walls")
     if min(cfg.tank.size) < 2 * cfg.dx:
@@ -325,3 +376,56 @@ def _inside(box: Box, size, key):
     for ax, (a, b, s) in enumerate(zip(box.min, box.max, size)):
         if a < -tol or b > s + tol:
             _fail(key, f"lies outside the tank interior [0, {s}] on axis {ax} (min={box.min}, max={box.max})")
+
+
+def _check_probes(cfg: "Config") -> None:
+    """Probe geometry matches the type, has `dim` values, lies inside the tank; names are unique."""
+    geometry = {"pressure": "point", "water_level": "point", "water_volume": "box", "velocity": "box"}
+    seen: dict[str, int] = {}
+    for k, probe in enumerate(cfg.probes):
+        key = f"probes[{k}]"
+        columns = [probe.name]
+        if probe.type == "velocity":
+            columns += [f"{probe.name}_{a}" for a in "xyz"[: cfg.dim]]
+        for col in columns:
+            if col in seen:
+                _fail(f"{key}.name", f"duplicate probe name '{col}' (also probes[{seen[col]}])")
+            if col == "time":
+                _fail(f"{key}.name", "'time' is reserved for the time column")
+            seen[col] = k
+        need = geometry[probe.type]
+        other = "box" if need == "point" else "point"
+        if getattr(probe, need) is None:
+            _fail(f"{key}.{need}", f"required for a probe of type {probe.type}")
+        if getattr(probe, other) is not None:
+            _fail(f"{key}.{other}", f"not used by a probe of type {probe.type} (give {need})")
+        if probe.point is not None:
+            _need_len(probe.point, cfg.dim, f"{key}.point")
+            for ax, (v, s) in enumerate(zip(probe.point, cfg.tank.size)):
+                if not -1e-12 <= v <= s + 1e-12:
+                    _fail(f"{key}.point", f"lies outside the tank interior [0, {s}] on axis {ax} "
+                          f"(point={probe.point})")
+        if probe.box is not None:
+            _need_len(probe.box.min, cfg.dim, f"{key}.box.min")
+            _need_len(probe.box.max, cfg.dim, f"{key}.box.max")
+            _inside(probe.box, cfg.tank.size, f"{key}.box")
+        if probe.every is not None and isinstance(cfg.dt, float) and probe.every < cfg.dt:
+            _fail(f"{key}.every", f"must be at least dt = {cfg.dt}")
+
+
+def _check_images(cfg: "Config") -> None:
+    images = cfg.output.images
+    if images is None:
+        return
+    if images.every < cfg.output.every:
+        _fail("output.images.every", f"must be at least output.every = {cfg.output.every} (pictures are made from frames)")
+    if len(images.size) != 2:
+        _fail("output.images.size", f"needs 2 values [width, height], got {len(images.size)}")
+    if max(images.size) > 8192:
+        _fail("output.images.size", f"at most 8192 pixels a side, got {images.size}")
+    if images.range is not None and (len(images.range) != 2 or not images.range[1] > images.range[0]):
+        _fail("output.images.range", f"needs [lo, hi] with hi > lo, got {images.range}")
+    if cfg.dim == 2 and images.camera not in ("auto", "front"):
+        _fail("output.images.camera", f"a 2D run is drawn in its plane: use front or auto, not {images.camera}")
+    if cfg.dim == 2 and images.field == "velocity_z":
+        _fail("output.images.field", "a 2D run has no velocity_z (its axes are x and y)")
