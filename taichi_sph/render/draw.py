@@ -169,8 +169,8 @@ class Drawing:
         if self._bar_clim != tuple(clim):
             if self._bar_clim is not None:
                 self.plotter.remove_scalar_bar()
-            bar = {"title": self.title, "mapper": actor.mapper, "vertical": True, "position_x": 0.82,
-                   "position_y": 0.1, "width": 0.05, "height": 0.8, "color": "black", "title_font_size": 16,
+            bar = {"title": self.title + "\n", "mapper": actor.mapper, "vertical": True, "position_x": 0.82,
+                   "position_y": 0.08, "width": 0.05, "height": 0.76, "color": "black", "title_font_size": 16,
                    "label_font_size": 14, "fmt": "%.3g"}
             if self.categorical:
                 bar.update(n_labels=0)
@@ -186,7 +186,8 @@ class Drawing:
                                   render_points_as_spheres=True, point_size=ps, name="walls")
         else:
             self.plotter.remove_actor("walls")
-        self.plotter.add_text(f"t = {time:.4g} s", position="upper_left", font_size=12, color="black", name="time")
+        self.plotter.add_text(f"t = {time:.4g} s", position=(10, self.height - 30), font_size=12, color="black",
+                              name="time")
         return self.plotter.screenshot(return_img=True)
 
     def _label_kinds(self, actor) -> None:
