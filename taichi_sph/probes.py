@@ -14,8 +14,9 @@ Each quantity uses the cubic-spline kernel of the solver (support 2.4 dx, h = 1.
 
 - pressure (Pa): Shepard-normalised SPH interpolation over water particles (seed 000 eq 10 with
   the kernel sum in the denominator), P(x) = sum_j P_j V_j W(x - x_j) / sum_j V_j W(x - x_j).
-  Exact for a linear pressure field when the support is full of water; within 2.4 dx of a wall
-  it is a one-sided average (the gauge reads the pressure about 0.4 dx further from the wall).
+  Reproduces a linear pressure field within 1e-3 rho g dx when the support is full of water;
+  within 2.4 dx of a wall it is a one-sided average (a gauge on a floor reads the pressure about
+  0.6 dx up in the water).
   A dry gauge (water fraction below 0.1 at the point) reads 0, the atmosphere.
 - water_level (m): elevation where the SPH water fraction phi(z) = sum_water V_j W / (1 - s_wall),
   s_wall = sum_wall V_j W, falls through 0.5 on the line, found from the top down on samples dz =

@@ -3,6 +3,7 @@ unstable (exit code 3, one message naming step, quantity and particle, frames ke
 
 import json
 import re
+import xml.etree.ElementTree as ET
 
 import h5py
 import numpy as np
@@ -153,3 +154,6 @@ def test_unstable_run_stops_with_exit_3_and_keeps_frames(run_cli, tmp_path):
         assert diag["time"].shape == (step,)
         assert diag["max_speed"][-1] > 0.5
         assert np.all(diag["max_speed"][:-1] <= 0.5)
+    # the XDMF sidecar is written whatever the end, naming every frame kept
+    grids = ET.parse(out.with_suffix(".xdmf")).getroot().findall("Domain/Grid/Grid")
+    assert len(grids) == n_frames

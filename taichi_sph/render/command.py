@@ -235,9 +235,15 @@ def _save_png(path: Path, img: np.ndarray) -> None:
 
 
 def run_command(args) -> int:
-    """The `render` subcommand."""
+    """The `render` subcommand: checks every option here, then draws in a child process, so that a
+    machine without offscreen OpenGL (VTK crashes there) gets one line and exit code 2."""
+    import json
+    import os
+    import subprocess
+    import sys
+
     from ..io.hdf5 import RunFile, RunFileError
-    from .offscreen import check_offscreen, missing_modules
+    from .offscreen import configure_env, crash_message, missing_modules
 
     try:
         run = RunFile(args.run_file)
@@ -246,13 +252,47 @@ def run_command(args) -> int:
     src = fr.RunSource(run)
     try:
         plan = make_plan(src, args, str(args.run_file))
-        missing = missing_modules(str(plan.movie) if plan.movie else None)
-        if missing:
-            raise InputError(f"render needs the Python package(s) {', '.join(m.replace('_', '-') for m in missing)}: "
-                             "pip install 'taichi-sph[render]'")
-        why = check_offscreen()
-        if why:
-            raise InputError(f"render: {why}")
+    finally:
+        src.close()
+    missing = missing_modules(str(plan.movie) if plan.movie else None)
+    if missing:
+        raise InputError(f"render needs the Python package(s) {', '.join(m.replace('_', '-') for m in missing)}: "
+                         "pip install 'taichi-sph[render]'")
+    options = {k: v for k, v in vars(args).items() if k != "command"}
+    res = subprocess.run([sys.executable, "-m", "taichi_sph.render.command", json.dumps(options)], check=False,
+                         stderr=subprocess.PIPE, text=True, env=configure_env(dict(os.environ)))
+    if res.returncode < 0:
+        raise InputError(f"render: {crash_message(res.returncode)}")
+    if res.returncode != 0:
+        lines = [ln.strip() for ln in res.stderr.splitlines() if ln.strip()]
+        last = lines[-1] if lines else f"exit code {res.returncode}"
+        if res.returncode == 2:
+            raise InputError(last.removeprefix("taichi-sph: error: "))
+        print(f"taichi-sph: error: render failed: {last}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _child(options_json: str) -> int:
+    """Drawing process: a tiny test picture first (nothing is written if it fails), then the frames."""
+    import argparse
+    import json
+    import sys
+
+    from ..io.hdf5 import RunFile
+    from .offscreen import PACKAGES_HINT, probe_render
+
+    args = argparse.Namespace(**json.loads(options_json))
+    try:
+        probe_render()
+    except Exception as exc:  # noqa: BLE001  (any failure to draw means: not available here)
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"taichi-sph: error: render: offscreen rendering is not available on this machine: {msg} "
+              f"({PACKAGES_HINT})", file=sys.stderr)
+        return 2
+    src = fr.RunSource(RunFile(args.run_file))
+    try:
+        plan = make_plan(src, args, str(args.run_file))
         pngs, movie = draw_frames(src, plan)
     finally:
         src.close()
@@ -261,3 +301,9 @@ def run_command(args) -> int:
     if movie:
         print(f"wrote {movie} ({len(plan.indices)} frames at {plan.fps:g} fps)")
     return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(_child(sys.argv[1]))

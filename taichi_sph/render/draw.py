@@ -111,24 +111,36 @@ class Drawing:
 
     # -- static parts -------------------------------------------------------------------------------
     def _draw_markers(self, markers: np.ndarray) -> None:
-        """Soil markers as a translucent region: the outer surface of the voxels that hold markers."""
+        """Soil markers as a translucent region: the outer surface of the cells (one per marker, of the
+        markers' own spacing, centred on them) that hold a marker, one-cell holes closed."""
+        from scipy import ndimage
+        from scipy.spatial import cKDTree
+
         pv = self.pv
         pts = embed(markers)
-        h = self.dx
-        lo = pts.min(axis=0) - h
-        dims = np.maximum(np.ceil((pts.max(axis=0) + h - lo) / h).astype(int), 1)
+        if len(pts) > 1:
+            d, _ = cKDTree(pts).query(pts, k=2)
+            h = float(np.median(d[:, 1]))
+        else:
+            h = self.dx
+        h = h if h > 0 else self.dx
+        lo = pts.min(axis=0) - 1.5 * h  # one empty cell of margin, so that closing keeps the outline
+        dims = np.floor((pts.max(axis=0) + 1.5 * h - lo) / h).astype(int) + 1
         if self.dim == 2:
             lo[1] = -0.5 * h
             dims[1] = 1
-        grid = pv.ImageData(dimensions=tuple(int(d) + 1 for d in dims), spacing=(h, h, h), origin=tuple(lo))
-        idx = np.floor((pts - lo) / h).astype(int)
-        idx = np.minimum(idx, dims - 1)
-        occupied = np.zeros(tuple(dims), dtype=np.uint8)
-        occupied[idx[:, 0], idx[:, 1], idx[:, 2]] = 1
-        grid.cell_data["soil"] = occupied.ravel(order="F")
+        idx = np.minimum(np.floor((pts - lo) / h).astype(int), dims - 1)
+        occupied = np.zeros(tuple(dims), dtype=bool)
+        occupied[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+        structure = ndimage.generate_binary_structure(3, 1)
+        if self.dim == 2:
+            structure[:, [0, 2], :] = False  # close in the x-z plane only
+        occupied |= ndimage.binary_closing(occupied, structure=structure)
+        grid = pv.ImageData(dimensions=tuple(int(n) + 1 for n in dims), spacing=(h, h, h), origin=tuple(lo))
+        grid.cell_data["soil"] = occupied.ravel(order="F").astype(np.uint8)
         from vtkmodules.vtkFiltersGeometry import vtkGeometryFilter
 
-        outer = vtkGeometryFilter()  # outer faces only: the voxels' shared faces are left out
+        outer = vtkGeometryFilter()  # outer faces only: the cells' shared faces are left out
         outer.SetInputData(grid.threshold(0.5, scalars="soil"))
         outer.Update()
         region = pv.wrap(outer.GetOutput())
@@ -169,8 +181,8 @@ class Drawing:
         if self._bar_clim != tuple(clim):
             if self._bar_clim is not None:
                 self.plotter.remove_scalar_bar()
-            bar = {"title": self.title, "mapper": actor.mapper, "vertical": True, "position_x": 0.82,
-                   "position_y": 0.1, "width": 0.05, "height": 0.8, "color": "black", "title_font_size": 16,
+            bar = {"title": self.title + "\n", "mapper": actor.mapper, "vertical": True, "position_x": 0.82,
+                   "position_y": 0.08, "width": 0.05, "height": 0.76, "color": "black", "title_font_size": 16,
                    "label_font_size": 14, "fmt": "%.3g"}
             if self.categorical:
                 bar.update(n_labels=0)
@@ -186,7 +198,8 @@ class Drawing:
                                   render_points_as_spheres=True, point_size=ps, name="walls")
         else:
             self.plotter.remove_actor("walls")
-        self.plotter.add_text(f"t = {time:.4g} s", position="upper_left", font_size=12, color="black", name="time")
+        self.plotter.add_text(f"t = {time:.4g} s", position=(10, self.height - 30), font_size=12, color="black",
+                              name="time")
         return self.plotter.screenshot(return_img=True)
 
     def _label_kinds(self, actor) -> None:

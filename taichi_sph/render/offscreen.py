@@ -1,5 +1,6 @@
-"""Can this machine render offscreen? Asked in a subprocess, because VTK without a usable OpenGL
-(EGL or OSMesa) library crashes the process (segmentation fault) instead of raising.
+"""Can this machine render offscreen? VTK without a usable OpenGL (EGL or OSMesa) library crashes the
+process (segmentation fault) instead of raising, so drawing happens in a child process that first
+makes a tiny test picture (`probe_render`); `check_offscreen` asks the same question up front.
 
 With no display (no DISPLAY / WAYLAND_DISPLAY), VTK is told to use its EGL window, which runs on
 Mesa's software renderer when there is no GPU (Debian/Ubuntu packages libegl1, libegl-mesa0,
@@ -15,16 +16,26 @@ import sys
 
 PACKAGES_HINT = "Debian/Ubuntu: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri"
 
-_PROBE = """
-import numpy as np
-import pyvista as pv
-p = pv.Plotter(off_screen=True, window_size=(32, 32))
-p.add_points(np.zeros((1, 3)))
-img = p.screenshot(return_img=True)
-p.close()
-assert img.shape[:2] == (32, 32), img.shape
-print("ok")
-"""
+_PROBE = "from taichi_sph.render.offscreen import probe_render; probe_render(); print('ok')"
+
+
+def probe_render() -> None:
+    """Draw a 32 x 32 picture of one point; raises (or, without OpenGL, crashes) when it cannot."""
+    configure_env()
+    import numpy as np
+    import pyvista as pv
+
+    p = pv.Plotter(off_screen=True, window_size=(32, 32))
+    p.add_points(np.zeros((1, 3)))
+    img = p.screenshot(return_img=True)
+    p.close()
+    if img is None or img.shape[:2] != (32, 32):
+        raise RuntimeError(f"offscreen picture has the wrong shape {getattr(img, 'shape', None)}")
+
+
+def crash_message(returncode: int) -> str:
+    return (f"offscreen rendering is not available on this machine: the renderer crashed (signal {-returncode}); "
+            f"an OpenGL library (EGL or OSMesa) is missing ({PACKAGES_HINT})")
 
 
 def configure_env(env: dict | None = None) -> dict:
@@ -57,8 +68,7 @@ def check_offscreen(timeout: float = 120.0) -> str | None:
     if res.returncode == 0 and "ok" in res.stdout:
         return None
     if res.returncode < 0:
-        why = f"the renderer crashed (signal {-res.returncode}); an OpenGL library (EGL or OSMesa) is missing"
-    else:
-        lines = [ln for ln in res.stderr.strip().splitlines() if ln.strip()]
-        why = lines[-1].strip() if lines else f"exit code {res.returncode}"
+        return crash_message(res.returncode)
+    lines = [ln for ln in res.stderr.strip().splitlines() if ln.strip()]
+    why = lines[-1].strip() if lines else f"exit code {res.returncode}"
     return f"offscreen rendering is not available on this machine: {why} ({PACKAGES_HINT})"
