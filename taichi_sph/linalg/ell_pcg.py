@@ -1,0 +1,350 @@
+"""PPE solver in Taichi kernels: a matrix in ELL form and a Jacobi-preconditioned conjugate gradient.
+
+The matrix of the pressure Poisson equation (SPEC 3 step 3, seed 000 eq 31 in the symmetric form of
+eq 24) has one row per water particle and off-diagonal entries only between a particle and its listed
+neighbours, so a row holds at most `max_nb` off-diagonal entries. It is stored row by row in fields
+sized (n_max, max_nb): `cols[i, k]`, `vals[i, k]` for k < `count[i]`, the diagonal apart in `diag[i]`,
+the right-hand side in `b[i]` and the solution in `x[i]`. Only the first `n` rows are active (`n` is a
+0-d field, so the active count can change every step without recompiling); columns must be < n.
+
+An assembly kernel fills a row from the loop iteration that owns it (one thread per row, no atomics),
+with the same `+=` meaning as a SparseMatrixBuilder (`add(i, i, v)` adds to the diagonal, a repeated
+column is summed). The isph assembly would change only where it now calls the builder:
+
+    @ti.kernel
+    def _k_assemble(self, ell: ti.template()):
+        for i in range(self.n):
+            if self.kind[i] == WATER:
+                ri = self.row[i]
+                ell.start_row(ri)                          # count = 0, diagonal = 0
+                if self.solve_mask[i] == 1 and self.free[i] == 0:
+                    for k in range(self.grid.nbr_count[i]):
+                        ...
+                        diag += K
+                        if self.free[j] == 1 or self.solve_mask[j] == 0:
+                            rhs += K * self._dirichlet_value(j)
+                        else:
+                            ell.add(ri, self.row[j], -K)   # was  A[ri, self.row[j]] += -K
+                    ell.add(ri, ri, diag)                  # was  A[ri, ri] += diag
+                    ell.b[ri] = rhs - source               # was  self.b[ri] = ...
+                else:
+                    ell.add(ri, ri, dirichlet_diag)
+                    ell.b[ri] = dirichlet_diag * self._dirichlet_value(i)
+
+    ppe = EllPCG(n_max=n_water, max_nb=width, tolerance=1e-8, max_iterations=2000)
+    self._k_assemble(ppe)                  # ppe.x still holds the last pressure: warm start
+    iterations, residual, converged = ppe.solve(n=n_water)
+
+A row that needs more than `max_nb` off-diagonal slots is not written past its end: the largest
+count needed is recorded and `solve` raises EllOverflowError before solving a truncated matrix
+(`with_width` then gives a wider solver to refill). Rows are strided by `max_nb` in memory, so the
+width costs memory traffic even where rows are short: size it near the largest row expected (the
+lattice neighbour count with a margin) rather than at the neighbour-list capacity; tools/bench_ppe.py
+measures both.
+
+Solver: preconditioned CG (Hestenes-Stiefel) with M = diag(A), starting from the x already in the
+field. Each iteration is one kernel launch (p update, matvec with the p.Ap reduction, x/r/z update
+with the r.r and r.z reductions) that returns one scalar, |r|^2, to the host; no vector leaves the
+device. When the recurrence says |r| / |b| <= tolerance, the true residual b - A x is computed; if it
+is above the tolerance (round-off drift, f32), CG restarts from the true residual, at most
+MAX_RESTARTS times, within `max_iterations` iterations in all. A zero right-hand side gives x = 0.
+The vectors use the runtime's default float (f32 or f64) unless `dtype` is given. An f32 solve stalls
+where the rounding of b - A x, about eps_32 |A| |x| / |b|, meets the tolerance (1e-5 to 1e-4 relative
+on a 900-row PPE) and then reports converged = False.
+"""
+
+import math
+
+import numpy as np
+import taichi as ti
+
+#: true-residual restarts allowed after the recurrence residual has met the tolerance
+MAX_RESTARTS = 3
+
+
+class EllOverflowError(RuntimeError):
+    """A PPE row has more off-diagonal entries than the ELL storage holds."""
+
+    def __init__(self, needed: int, capacity: int):
+        self.needed = int(needed)
+        self.capacity = int(capacity)
+        super().__init__(
+            f"a PPE row has {self.needed} off-diagonal entries but the ELL matrix holds {self.capacity} per row; "
+            f"raise the config key `neighbours.max` to at least {self.needed}"
+        )
+
+
+def _default_fp():
+    from taichi.lang import impl
+
+    return impl.get_runtime().default_fp
+
+
+@ti.data_oriented
+class EllPCG:
+    """Symmetric positive definite solve A x = b, A in ELL form in Taichi fields, Jacobi-PCG.
+
+    layout: "row" stores the slots of one row contiguously (a CPU thread per row reads them in one
+    stream; measured fastest on CPU), "column" stores slot k of consecutive rows contiguously (the
+    usual GPU ELL layout, for coalesced loads; not measured here on a GPU); "auto" picks "column" on
+    CUDA and "row" elsewhere.
+    """
+
+    name = "ell_pcg"
+
+    def __init__(self, n_max: int, max_nb: int, tolerance: float = 1.0e-8, max_iterations: int = 2000,
+                 dtype=None, layout: str = "auto"):
+        if n_max < 1 or max_nb < 1:
+            raise ValueError(f"EllPCG needs n_max >= 1 and max_nb >= 1, not {n_max} and {max_nb}")
+        self.n_max = int(n_max)
+        self.max_nb = int(max_nb)
+        self.tolerance = float(tolerance)
+        self.max_iterations = int(max_iterations)
+        self.dtype = fp = dtype if dtype is not None else _default_fp()
+        if layout == "auto":
+            from taichi.lang import impl
+
+            layout = "column" if impl.current_cfg().arch == ti.cuda else "row"
+        if layout not in ("row", "column"):
+            raise ValueError(f"layout must be 'row', 'column' or 'auto', not {layout!r}")
+        self.layout = layout
+        self.cols = ti.field(ti.i32)
+        self.vals = ti.field(fp)
+        for f in (self.cols, self.vals):
+            if layout == "row":
+                ti.root.dense(ti.i, self.n_max).dense(ti.j, self.max_nb).place(f)
+            else:
+                ti.root.dense(ti.j, self.max_nb).dense(ti.i, self.n_max).place(f)
+        self.count = ti.field(ti.i32, self.n_max)
+        self.diag = ti.field(fp, self.n_max)
+        self.b = ti.field(fp, self.n_max)
+        self.x = ti.field(fp, self.n_max)
+        self.inv_diag = ti.field(fp, self.n_max)
+        self.r = ti.field(fp, self.n_max)
+        self.z = ti.field(fp, self.n_max)
+        self.p = ti.field(fp, self.n_max)
+        self.ap = ti.field(fp, self.n_max)
+        self.n = ti.field(ti.i32, ())
+        self.overflow = ti.field(ti.i32, ())
+        # CG scalars stay on the device between kernels
+        self.bb = ti.field(fp, ())
+        self.rr = ti.field(fp, ())
+        self.rz = ti.field(fp, ())
+        self.rz_new = ti.field(fp, ())
+        self.pap = ti.field(fp, ())
+        self.alpha = ti.field(fp, ())
+        self.beta = ti.field(fp, ())
+        self.breakdown = ti.field(ti.i32, ())
+        self.n[None] = self.n_max
+
+    # ------------------------------------------------------------------ filling rows in a kernel
+    @ti.func
+    def start_row(self, i):
+        """Empty row i (no off-diagonal entries, zero diagonal); call before `add` on that row."""
+        self.count[i] = 0
+        self.diag[i] = ti.cast(0, self.dtype)
+
+    @ti.func
+    def add(self, i, j, v):
+        """A[i, j] += v. Only the thread that owns row i may call it (no atomics)."""
+        if j == i:
+            self.diag[i] += v
+        else:
+            k = self.count[i]
+            if k < self.max_nb:
+                self.cols[i, k] = j
+                self.vals[i, k] = v
+            else:
+                ti.atomic_max(self.overflow[None], k + 1)
+            self.count[i] = k + 1
+
+    @ti.func
+    def row_times(self, i, v: ti.template()):
+        """(A v)_i."""
+        s = self.diag[i] * v[i]
+        for k in range(ti.min(self.count[i], self.max_nb)):
+            s += self.vals[i, k] * v[self.cols[i, k]]
+        return s
+
+    def with_width(self, max_nb: int) -> "EllPCG":
+        """A new solver with `max_nb` slots per row and the same settings, its x copied from this one
+        (warm start); the matrix must be filled again. Its kernels compile anew (once)."""
+        other = EllPCG(self.n_max, max_nb, self.tolerance, self.max_iterations, self.dtype, self.layout)
+        other.x.copy_from(self.x)
+        other.n[None] = self.n[None]
+        return other
+
+    # ------------------------------------------------------------------ filling from the host
+    def load_csr(self, indptr, indices, data, b=None, x0=None) -> None:
+        """Fill the first n = len(indptr) - 1 rows from CSR arrays (e.g. a scipy.sparse matrix);
+        optionally b and x0. Host-side convenience for tests and tools; solvers fill in kernels."""
+        indptr = np.asarray(indptr, dtype=np.int64)
+        indices = np.asarray(indices, dtype=np.int64)
+        data = np.asarray(data, dtype=np.float64)
+        n = len(indptr) - 1
+        if n > self.n_max:
+            raise ValueError(f"matrix has {n} rows but the ELL matrix holds {self.n_max}")
+        rows = np.repeat(np.arange(n), np.diff(indptr))
+        on_diag = rows == indices
+        diag = np.zeros(self.n_max)
+        np.add.at(diag, rows[on_diag], data[on_diag])
+        r_off, c_off, v_off = rows[~on_diag], indices[~on_diag], data[~on_diag]
+        count = np.bincount(r_off, minlength=self.n_max).astype(np.int32)
+        if count.size and count.max() > self.max_nb:
+            raise EllOverflowError(int(count.max()), self.max_nb)
+        start = np.zeros(self.n_max + 1, dtype=np.int64)
+        np.cumsum(count, out=start[1:])
+        slot = np.arange(len(r_off)) - start[r_off]
+        cols = np.zeros((self.n_max, self.max_nb), dtype=np.int32)
+        vals = np.zeros((self.n_max, self.max_nb))
+        cols[r_off, slot] = c_off
+        vals[r_off, slot] = v_off
+        np_fp = np.float64 if self.dtype == ti.f64 else np.float32
+        self.cols.from_numpy(cols)
+        self.vals.from_numpy(vals.astype(np_fp))
+        self.count.from_numpy(count)
+        self.diag.from_numpy(diag.astype(np_fp))
+        if b is not None:
+            self.b.from_numpy(_padded(b, self.n_max, np_fp))
+        if x0 is not None:
+            self.x.from_numpy(_padded(x0, self.n_max, np_fp))
+        self.n[None] = n
+
+    def to_csr(self, n: int | None = None):
+        """The first n rows as a scipy.sparse.csr_matrix (host-side, for checks)."""
+        import scipy.sparse as sp
+
+        n = int(self.n[None]) if n is None else int(n)
+        count = np.minimum(self.count.to_numpy()[:n], self.max_nb)
+        mask = np.arange(self.max_nb)[None, :] < count[:, None]
+        rows = np.repeat(np.arange(n), count)
+        cols = self.cols.to_numpy()[:n][mask]
+        vals = self.vals.to_numpy()[:n][mask]
+        idx = np.arange(n)
+        all_rows = np.concatenate([rows, idx])
+        all_cols = np.concatenate([cols, idx])
+        all_vals = np.concatenate([vals, self.diag.to_numpy()[:n]]).astype(np.float64)
+        return sp.csr_matrix((all_vals, (all_rows, all_cols)), shape=(n, n))
+
+    # ------------------------------------------------------------------ CG kernels
+    @ti.kernel
+    def _k_residual(self) -> ti.types.vector(2, ti.f64):
+        """r = b - A x, z = M^-1 r, beta = 0 (p = z next); returns (|b|^2, |r|^2)."""
+        n = self.n[None]
+        zero = ti.cast(0, self.dtype)
+        one = ti.cast(1, self.dtype)
+        self.bb[None] = zero
+        self.rr[None] = zero
+        self.rz[None] = zero
+        for i in range(n):
+            d = self.diag[i]
+            inv = one
+            if d > 0:
+                inv = one / d
+            self.inv_diag[i] = inv
+            bi = self.b[i]
+            ri = bi - self.row_times(i, self.x)
+            zi = inv * ri
+            self.r[i] = ri
+            self.z[i] = zi
+            self.bb[None] += bi * bi
+            self.rr[None] += ri * ri
+            self.rz[None] += ri * zi
+        self.beta[None] = zero
+        return ti.Vector([ti.cast(self.bb[None], ti.f64), ti.cast(self.rr[None], ti.f64)])
+
+    @ti.kernel
+    def _k_iterate(self) -> ti.f64:
+        """One PCG iteration; returns the recurrence |r|^2, or -1 on breakdown (p.Ap <= 0)."""
+        n = self.n[None]
+        zero = ti.cast(0, self.dtype)
+        beta = self.beta[None]
+        for i in range(n):
+            self.p[i] = self.z[i] + beta * self.p[i]
+        self.pap[None] = zero
+        for i in range(n):
+            api = self.row_times(i, self.p)
+            self.ap[i] = api
+            self.pap[None] += self.p[i] * api
+        self.breakdown[None] = 0
+        self.alpha[None] = zero
+        if self.pap[None] > 0:
+            self.alpha[None] = self.rz[None] / self.pap[None]
+        else:
+            self.breakdown[None] = 1
+        alpha = self.alpha[None]
+        self.rr[None] = zero
+        self.rz_new[None] = zero
+        for i in range(n):
+            self.x[i] += alpha * self.p[i]
+            ri = self.r[i] - alpha * self.ap[i]
+            zi = self.inv_diag[i] * ri
+            self.r[i] = ri
+            self.z[i] = zi
+            self.rr[None] += ri * ri
+            self.rz_new[None] += ri * zi
+        self.beta[None] = zero
+        if self.rz[None] > 0:
+            self.beta[None] = self.rz_new[None] / self.rz[None]
+        self.rz[None] = self.rz_new[None]
+        out = ti.cast(self.rr[None], ti.f64)
+        if self.breakdown[None] == 1:
+            out = -1.0
+        return out
+
+    @ti.kernel
+    def _k_zero_x(self):
+        for i in range(self.n[None]):
+            self.x[i] = ti.cast(0, self.dtype)
+
+    @ti.kernel
+    def _k_take_overflow(self) -> ti.i32:
+        out = self.overflow[None]
+        self.overflow[None] = 0
+        return out
+
+    # ------------------------------------------------------------------ host API
+    def check_overflow(self) -> None:
+        """Raise EllOverflowError if a row was filled past `max_nb` since the last check."""
+        needed = int(self._k_take_overflow())
+        if needed > 0:
+            raise EllOverflowError(needed, self.max_nb)
+
+    def solve(self, n: int | None = None):
+        """Solve the first n rows (default: the n already set) from the x in the field.
+
+        Returns (iterations, relative residual |b - A x| / |b| of the returned x, converged).
+        """
+        self.check_overflow()
+        if n is not None:
+            if not 0 <= n <= self.n_max:
+                raise ValueError(f"n = {n} is outside 0..{self.n_max}")
+            self.n[None] = int(n)
+        bb, rr = (float(v) for v in self._k_residual())
+        if not bb > 0.0:
+            if math.isfinite(bb):
+                self._k_zero_x()
+                return 0, 0.0, True
+            return 0, math.nan, False
+        threshold = self.tolerance**2 * bb
+        iterations = 0
+        restarts = 0
+        while math.isfinite(rr) and rr > threshold and iterations < self.max_iterations:
+            while iterations < self.max_iterations:
+                rr_rec = self._k_iterate()
+                iterations += 1
+                if not rr_rec >= 0.0 or rr_rec <= threshold:  # breakdown, non-finite or converged
+                    break
+            bb, rr = (float(v) for v in self._k_residual())
+            if rr <= threshold or restarts == MAX_RESTARTS:
+                break
+            restarts += 1
+        residual = math.sqrt(rr / bb) if math.isfinite(rr) else math.nan
+        return iterations, residual, bool(residual <= self.tolerance)
+
+
+def _padded(v, n: int, dtype) -> np.ndarray:
+    out = np.zeros(n, dtype=dtype)
+    v = np.asarray(v)
+    out[: len(v)] = v
+    return out
