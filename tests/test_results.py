@@ -216,6 +216,25 @@ def test_render_pngs_have_the_asked_size_are_not_blank_and_differ_between_frames
         assert len(pngs) == 1 and _grey(pngs[0]).std() > 15, extra
 
 
+def test_soil_markers_are_drawn_as_a_translucent_region(tmp_path, offscreen):
+    from PIL import Image
+
+    def brownish(run):
+        (png,), _ = render_in_process(run, "--field", "kind", "--size", "320x240", "--frames", "0", "--out",
+                                      tmp_path / run.stem)
+        rgb = np.asarray(Image.open(png).convert("RGB"), dtype=int)
+        # translucent brown over white is measured (198, 171, 157): light, with red well above blue; water
+        # (blue), walls (grey), the white background and the opaque soil entry (160, 82, 45) of the kind
+        # colour bar are not
+        r, b = rgb[..., 0], rgb[..., 2]
+        return int(np.count_nonzero((r - b > 25) & (r > 180)))
+
+    with_markers = brownish(moving_run(tmp_path / "soil.h5", dim=2, frames=1))
+    without = brownish(moving_run(tmp_path / "bare.h5", dim=2, frames=1, markers=False))
+    # 5 markers make a 0.1 m x 0.02 m region: measured ~1600 such pixels at this view scale, none without
+    assert without == 0 and with_markers > 500, (with_markers, without)
+
+
 def render_in_process(run, *options):
     from taichi_sph.cli import _parser
     from taichi_sph.render import frames
