@@ -23,12 +23,14 @@ warm-up (JIT compilation excluded). Prints Markdown tables naming the machine an
 import argparse
 import math
 import os
-import platform
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from bench import (
+    machine,  # tools/bench.py: CPU model, cores, OS (run from the repository root)
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -43,18 +45,6 @@ CASES = {
     "80k": (283, 283),
     "3d20k": (27, 27, 27),
 }
-
-
-def machine() -> str:
-    cpu = platform.processor() or "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} logical cores, {platform.system()} {platform.release()}"
 
 
 def lattice_particles(shape, dx, jitter, seed):
