@@ -340,12 +340,12 @@ class WCSPHSolver:
                         same = True
                         if ti.static(self.has_air):
                             same = kj == ki
-                        if ti.static(self.xsph_on or normalise):  # noqa: SIM102 (compile-time if)
-                            if same:
-                                wij = kernels.w(r, hij, self.dim)
-                                if ti.static(self.xsph_on):
-                                    xs += terms.xsph(mj, rhoi, rhoj, vij, wij)
-                                if ti.static(normalise):
+                        if ti.static(self.xsph_on or normalise):
+                            wij = kernels.w(r, hij, self.dim)
+                            if ti.static(self.xsph_on):
+                                xs += terms.xsph(mj, rhoi, rhoj, vij, wij)
+                            if ti.static(normalise):  # noqa: SIM102 (compile-time if)
+                                if same:
                                     num += mj * wij
                                     den += mj / rhoj * wij
                 if ti.static(normalise):
@@ -469,6 +469,9 @@ class WCSPHSolver:
                             same = kj == ki
                         if same:
                             acc += terms.pressure_same_material(mj, pi, rhoi, pj, rhoj, gw)
+                        else:
+                            acc += terms.pressure_interface(mi, voli, mj / rhoj, pi, pj, gw)
+                        if same:
                             acc += isph_terms.variable_laplacian_pair(mj, rhoi, nui, rhoj, nui, f_ij) * vij
                             if ti.static(self.av_on):
                                 pij = terms.artificial_viscosity(vij, rij, r2, hij, c0i, 0.5 * (rhoi + rhoj),
@@ -477,7 +480,6 @@ class WCSPHSolver:
                             if ti.static(self.cohesion_on):
                                 acc += terms.cohesion(cohi, mj, gw)
                         else:
-                            acc += terms.pressure_interface(mi, voli, mj / rhoj, rhoi, rhoj, pi, pj, gw)
                             nuj = self._nu(ti.cast(kj, ti.i32))
                             acc += isph_terms.variable_laplacian_pair(mj, rhoi, nui, rhoj, nuj, f_ij) * vij
                 self.a[i] = acc

@@ -15,14 +15,13 @@ def pressure_same_material(m_j, p_i, rho_i, p_j, rho_j, gw):
 
 
 @ti.func
-def pressure_interface(m_i, v_i, v_j, rho_i, rho_j, p_i, p_j, gw):
-    """Pressure acceleration between particles of different materials (water-air), in the volume form
-    -(V_i^2 + V_j^2) / m_i p_ij gw with the density-weighted interface pressure
-    p_ij = (rho_j p_i + rho_i p_j) / (rho_i + rho_j) (Hu & Adams 2006). Between particles of equal volume
-    and density it equals eq 34; across a 1000:1 density jump eq 34's m_j / rho_i^2 weighting would push
-    an air particle with a water particle's mass."""
-    p_ij = (rho_j * p_i + rho_i * p_j) / (rho_i + rho_j)
-    return -(v_i * v_i + v_j * v_j) / m_i * p_ij * gw
+def pressure_interface(m_i, v_i, v_j, p_i, p_j, gw):
+    """Pressure acceleration between particles of different materials (water-air), in volume form:
+    -(V_i^2 + V_j^2) / m_i (p_i + p_j) / 2 gw. Pair forces stay equal and opposite, and between particles
+    of equal volume and density this is eq 34; eq 34's m_j / rho_j^2 weighting would instead let a water
+    particle push an air particle with water's mass over air's density squared. Each side feels the
+    other's pressure in full, so neither can slip into the other."""
+    return -(v_i * v_i + v_j * v_j) / m_i * 0.5 * (p_i + p_j) * gw
 
 
 @ti.func
