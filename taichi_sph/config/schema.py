@@ -188,7 +188,7 @@ class WCSPH(Strict):
     release_velocity: Literal["none", "right_face"] = "none"
     #: neighbour lists hold pairs up to (1 + skin) x the support radius and are rebuilt only when some
     #: particle has moved far enough to need it (performance; results do not depend on it)
-    neighbour_skin: Annotated[float, Field(ge=0, le=0.5)] = 0.1
+    neighbour_skin: Annotated[float, Field(ge=0, le=0.5)] = 0.2
 
 
 class TimeStep(Strict):

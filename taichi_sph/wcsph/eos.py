@@ -29,7 +29,7 @@ def pressure(rho, rho0, b, gamma):
 @ti.func
 def sound_speed(rho, rho0, b, gamma):
     """Local sound speed c = sqrt(dp/drho) = sqrt(gamma B / rho0) (rho / rho0)^((gamma - 1) / 2)."""
-    return ti.sqrt(gamma * b / rho0 * (rho / rho0) ** (gamma - 1.0))
+    return ti.sqrt(gamma * b / rho0 * (rho / rho0) ** (gamma - 1))
 
 
 def pressure_np(rho, rho0: float, b: float, gamma: float):

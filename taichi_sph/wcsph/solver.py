@@ -20,7 +20,7 @@ dt = Delta t^n starts from the accelerations a^n of the previous step (or `initi
    eq 49 and the diagnostics need, returned as one small vector (the
    only transfer to the host per step besides the list-rebuild test).
 
-The two pair loops read each neighbour from one packed vector (x, v, rho, p, m, kind[, h]): one
+The two pair loops read each neighbour from one packed vector (x, v, rho, p / rho^2, m, kind[, h]): one
 contiguous load per neighbour instead of six. Physics a scene does not use is compiled out with
 ti.static flags (air, cohesion, artificial viscosity, XSPH, variable h). Soil (eq 35, 37-45) and Biot
 drag (eq 46-47) are meant to join as further kinds in the same pair loops behind flags of their own.
@@ -76,11 +76,11 @@ class WCSPHSolver:
         self.p_amb = w.ambient_pressure
         self.rho_w = cfg.fluid.density
         self.c_w = cfg.sound_speed()
-        self.gamma_w = w.water.gamma
+        self.gamma_w = _exponent(w.water.gamma)
         self.b_w = eos.tait_modulus(self.rho_w, self.c_w, self.gamma_w)
         self.nu_w = cfg.fluid.viscosity
         self.rho_a = w.air.density
-        self.gamma_a = w.air.gamma
+        self.gamma_a = _exponent(w.air.gamma)
         self.b_a = self.p_amb
         self.c_a = math.sqrt(self.gamma_a * self.b_a / self.rho_a)
         self.nu_a = w.air.viscosity
@@ -120,10 +120,10 @@ class WCSPHSolver:
         self.cell = 2.0 * self.h_hi + self.skin
         self.max_nb = cfg.max_neighbours()
 
-        # packed neighbour view: x (dim), v (dim), rho, p, m, kind[, h]
+        # packed neighbour view: x (dim), v (dim), rho, p / rho^2, m, kind[, h]
         self.S_V = dim
         self.S_RHO = 2 * dim
-        self.S_P = 2 * dim + 1
+        self.S_PR = 2 * dim + 1  # p / rho^2
         self.S_M = 2 * dim + 2
         self.S_KIND = 2 * dim + 3
         self.S_H = 2 * dim + 4
@@ -248,7 +248,7 @@ class WCSPHSolver:
             self.s[i][d] = self.x[i][d]
             self.s[i][self.S_V + d] = self.v[i][d]
         self.s[i][self.S_RHO] = self.rho[i]
-        self.s[i][self.S_P] = self.p[i]
+        self.s[i][self.S_PR] = self.p[i] / (self.rho[i] * self.rho[i])
         self.s[i][self.S_M] = self.m[i]
         self.s[i][self.S_KIND] = ti.cast(self.kind[i], float)
         if ti.static(self.variable_h):
@@ -324,7 +324,8 @@ class WCSPHSolver:
                     if r2 >= 4.0 * hij * hij or r2 == 0.0:
                         continue
                     r = ti.sqrt(r2)
-                    gw = kernels.dw_dr(r, hij, self.dim) / r * rij
+                    wij, dwdr = kernels.w_and_dw_dr(r, hij, self.dim)
+                    gw = dwdr / r * rij
                     kj = sj[self.S_KIND]
                     if kj == WALL:
                         db = self.wdepth[j]
@@ -341,7 +342,6 @@ class WCSPHSolver:
                         if ti.static(self.has_air):
                             same = kj == ki
                         if ti.static(self.xsph_on or normalise):
-                            wij = kernels.w(r, hij, self.dim)
                             if ti.static(self.xsph_on):
                                 xs += terms.xsph(mj, rhoi, rhoj, vij, wij)
                             if ti.static(normalise):  # noqa: SIM102 (compile-time if)
@@ -363,7 +363,7 @@ class WCSPHSolver:
                 self.rho[i] = rho
                 self.p[i] = p
                 self.s[i][self.S_RHO] = rho
-                self.s[i][self.S_P] = p
+                self.s[i][self.S_PR] = p / (rho * rho)
                 if ti.static(self.variable_h):
                     self.s[i][self.S_H] = self.h[i]
 
@@ -420,7 +420,8 @@ class WCSPHSolver:
                 xi = self._pos(si)
                 vi = self._vel(si)
                 rhoi = si[self.S_RHO]
-                pi = si[self.S_P]
+                pri = si[self.S_PR]
+                pi = pri * rhoi * rhoi
                 mi = si[self.S_M]
                 ki = self.kind[i]
                 voli = mi / rhoi
@@ -444,7 +445,7 @@ class WCSPHSolver:
                     gw = dwdr / r * rij
                     f_ij = isph_terms.laplacian_weight(r, hij, self.eta2, self.dim)
                     kj = sj[self.S_KIND]
-                    pj = sj[self.S_P]
+                    prj = sj[self.S_PR]
                     if kj == WALL:
                         # boundary particle: the virtual velocity of eq 50-51, the density of i and the
                         # pressure of i extrapolated hydrostatically to it (Neumann condition)
@@ -453,8 +454,8 @@ class WCSPHSolver:
                         beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
                         vij = terms.boundary_relative_velocity(vi, nrm, beta, self.no_slip)
                         mj = rhoi * self.vol0
-                        pj = isph_terms.wall_pressure(pi, rhoi, self.g, self._pos(sj), xi)
-                        acc += terms.pressure_same_material(mj, pi, rhoi, pj, rhoi, gw)
+                        pw = isph_terms.wall_pressure(pi, rhoi, self.g, self._pos(sj), xi)
+                        acc += terms.pressure_same_material(mj, pri, pw / (rhoi * rhoi), gw)
                         acc += isph_terms.variable_laplacian_pair(mj, rhoi, nui, rhoi, nui, f_ij) * vij
                         if ti.static(self.av_on):
                             pij = terms.artificial_viscosity(vij, rij, r2, hij, c0i, rhoi, self.av_alpha,
@@ -468,9 +469,9 @@ class WCSPHSolver:
                         if ti.static(self.has_air):
                             same = kj == ki
                         if same:
-                            acc += terms.pressure_same_material(mj, pi, rhoi, pj, rhoj, gw)
+                            acc += terms.pressure_same_material(mj, pri, prj, gw)
                         else:
-                            acc += terms.pressure_interface(mi, voli, mj / rhoj, pi, pj, gw)
+                            acc += terms.pressure_interface(mi, voli, mj / rhoj, pi, prj * rhoj * rhoj, gw)
                         if same:
                             acc += isph_terms.variable_laplacian_pair(mj, rhoi, nui, rhoj, nui, f_ij) * vij
                             if ti.static(self.av_on):
@@ -614,3 +615,8 @@ class WCSPHSolver:
             return self.cfg.guard.max_speed
         height = float(self.cfg.tank.size[-1])
         return 20.0 * math.sqrt(self.g_abs * height) if self.g_abs > 0 else 100.0
+
+
+def _exponent(gamma: float):
+    """An integral exponent as int, so that the EOS compiles (rho / rho0)^7 to multiplications."""
+    return int(gamma) if float(gamma).is_integer() else float(gamma)

@@ -9,9 +9,10 @@ import taichi as ti
 
 
 @ti.func
-def pressure_same_material(m_j, p_i, rho_i, p_j, rho_j, gw):
-    """Pressure acceleration of eq 34 between particles of one material: -m_j (p_i/rho_i^2 + p_j/rho_j^2) gw."""
-    return -m_j * (p_i / (rho_i * rho_i) + p_j / (rho_j * rho_j)) * gw
+def pressure_same_material(m_j, pr_i, pr_j, gw):
+    """Pressure acceleration of eq 34 between particles of one material, -m_j (p_i/rho_i^2 + p_j/rho_j^2) gw,
+    with pr = p / rho^2 of each particle."""
+    return -m_j * (pr_i + pr_j) * gw
 
 
 @ti.func
