@@ -50,6 +50,9 @@ DT_CFL, DT_VISCOUS, DT_FORCE = 1, 2, 3
 H_MIN, H_MAX = 0.5, 1.1
 #: reductions returned by the force pass
 _NRED = 9
+#: scenes with fewer fluid particles run their loops serially (measured: a parallel loop over ~800
+#: particles costs ~55 us of thread dispatch, a serial one ~15 us; above ~2000 the threads win)
+SERIAL_BELOW = 2000
 
 
 @ti.data_oriented
@@ -120,17 +123,27 @@ class WCSPHSolver:
         self.cell = 2.0 * self.h_hi + self.skin
         self.max_nb = cfg.max_neighbours()
 
-        # packed neighbour view: x (dim), v (dim), rho, p / rho^2, m, kind[, h]
+        # packed neighbour views. s: x (dim), v (dim), rho, m, kind[, h] at the start of a step (read by the
+        # density pass); q: rho, p / rho^2[, h] after the density pass (read by the force pass). Each
+        # pass writes only fields that no particle reads in that pass, so every step is three loops.
         self.S_V = dim
         self.S_RHO = 2 * dim
-        self.S_PR = 2 * dim + 1  # p / rho^2
-        self.S_M = 2 * dim + 2
-        self.S_KIND = 2 * dim + 3
-        self.S_H = 2 * dim + 4
-        self.ns = 2 * dim + 4 + (1 if self.variable_h else 0)
+        self.S_M = 2 * dim + 1
+        self.S_KIND = 2 * dim + 2
+        self.S_H = 2 * dim + 3
+        self.ns = 2 * dim + 3 + (1 if self.variable_h else 0)
+        self.Q_RHO, self.Q_PR, self.Q_H = 0, 1, 2
+        self.nq = 3 if self.variable_h else 2
+        # small scenes run their loops serially: a parallel loop costs ~50 us of thread dispatch
+        self.serial = self.n_fluid < SERIAL_BELOW
 
         vec = ti.Vector.field
         self.s = vec(self.ns, float, n)
+        self.q = vec(self.nq, float, n)
+        # reductions of the kick and force passes (reading a 0-d vector field costs ~7 us, a kernel's
+        # vector return value ~50 us)
+        self.red_kick = vec(2, float, ())
+        self.red_forces = vec(_NRED, float, ())
         self.x = vec(dim, float, n)
         self.v = vec(dim, float, n)  # leap-frog velocity v^{n+1/2}
         self.a = vec(dim, float, n)
@@ -138,7 +151,6 @@ class WCSPHSolver:
         self.normal = vec(dim, float, n)
         self.x0 = vec(dim, float, n)  # positions at the last neighbour-list build
         self.rho = ti.field(float, n)
-        self.rho_tmp = ti.field(float, n)
         self.p = ti.field(float, n)
         self.h = ti.field(float, n)
         self.m = ti.field(float, n)
@@ -248,31 +260,37 @@ class WCSPHSolver:
             self.s[i][d] = self.x[i][d]
             self.s[i][self.S_V + d] = self.v[i][d]
         self.s[i][self.S_RHO] = self.rho[i]
-        self.s[i][self.S_PR] = self.p[i] / (self.rho[i] * self.rho[i])
         self.s[i][self.S_M] = self.m[i]
         self.s[i][self.S_KIND] = ti.cast(self.kind[i], float)
+        self.q[i][self.Q_RHO] = self.rho[i]
+        self.q[i][self.Q_PR] = self.p[i] / (self.rho[i] * self.rho[i])
         if ti.static(self.variable_h):
             self.s[i][self.S_H] = self.h[i]
+            self.q[i][self.Q_H] = self.h[i]
 
     # ------------------------------------------------------------------ kernels
     @ti.kernel
     def _k_mask(self):
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             self.fmask[i] = 1 if (self.active[i] == 1 and self.kind[i] != WALL) else 0
 
     @ti.kernel
     def _k_after_build(self):
-        """After a list build: positions at build time and the packed view."""
+        """After a list build: positions at build time and the packed views."""
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             self.x0[i] = self.x[i]
             self._pack(i)
 
     @ti.kernel
-    def _k_kick_drift(self, dt: float, dt_prev: float) -> ti.types.vector(2, float):
-        """Leap-frog (eq 48): kick with a^n, drift with v^{n+1/2} plus the XSPH correction (eq 53).
-        Returns the largest squared displacement since the last list build and the largest h."""
+    def _k_kick_drift(self, dt: float, dt_prev: float):
+        """Leap-frog (eq 48): kick with a^n, drift with v^{n+1/2} plus the XSPH correction (eq 53); the
+        density and h of the last density pass become the start values of this one. Returns the largest
+        squared displacement since the last list build and the largest h."""
         d2max = 0.0
         hmax = 0.0
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.fmask[i] == 1:
                 vh = self.v[i] + 0.5 * (dt_prev + dt) * self.a[i]
@@ -284,11 +302,14 @@ class WCSPHSolver:
                 for d in ti.static(range(self.dim)):
                     self.s[i][d] = xn[d]
                     self.s[i][self.S_V + d] = vh[d]
+                self.s[i][self.S_RHO] = self.q[i][self.Q_RHO]
                 dd = xn - self.x0[i]
                 ti.atomic_max(d2max, dd.dot(dd))
                 if ti.static(self.variable_h):
-                    ti.atomic_max(hmax, self.h[i])
-        return ti.Vector([d2max, hmax])
+                    hi = self.q[i][self.Q_H]
+                    self.s[i][self.S_H] = hi
+                    ti.atomic_max(hmax, hi)
+        self.red_kick[None] = ti.Vector([d2max, hmax])
 
     @ti.kernel
     def _k_density(self, dt: float, normalise: ti.template()):
@@ -296,7 +317,9 @@ class WCSPHSolver:
         (eq 25 in volume form; walls with the virtual velocity of eq 50-51), rho^{n+1} = rho^n (1 - D_i dt)
         (eq 48), h^{n+1} = h^n (1 + D_i dt / d) (eq 52), the XSPH correction (eq 53) and, when `normalise`,
         eq 27 applied to rho^n first: rho_i = sum_{j in a} m_j W_ij / sum_{j in a} (m_j / rho_j) W_ij over
-        the material a of i (self included). Then the equations of state (eq 39-41)."""
+        the material a of i (self included). Then the equations of state (eq 39-41). Reads the view s,
+        writes the view q and the particle's own fields."""
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.fmask[i] == 1:
                 si = self.s[i]
@@ -351,21 +374,18 @@ class WCSPHSolver:
                 if ti.static(normalise):
                     rhoi = num / den
                 dd = div * dt
-                self.rho_tmp[i] = rhoi * (1.0 - dd)
-                if ti.static(self.xsph_on):
-                    self.xs[i] = self.xsph_eps * xs
-                if ti.static(self.variable_h):
-                    self.h[i] = ti.min(ti.max(hi * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
-        for i in range(self.n):
-            if self.fmask[i] == 1:
-                rho = self.rho_tmp[i]
+                rho = rhoi * (1.0 - dd)
                 p = self._eos_pressure(self.kind[i], rho)
                 self.rho[i] = rho
                 self.p[i] = p
-                self.s[i][self.S_RHO] = rho
-                self.s[i][self.S_PR] = p / (rho * rho)
+                self.q[i][self.Q_RHO] = rho
+                self.q[i][self.Q_PR] = p / (rho * rho)
+                if ti.static(self.xsph_on):
+                    self.xs[i] = self.xsph_eps * xs
                 if ti.static(self.variable_h):
-                    self.s[i][self.S_H] = self.h[i]
+                    hn = ti.min(ti.max(hi * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
+                    self.h[i] = hn
+                    self.q[i][self.Q_H] = hn
 
     @ti.kernel
     def _k_wall_pressure(self):
@@ -401,7 +421,7 @@ class WCSPHSolver:
                 self.p[i] = pw
 
     @ti.kernel
-    def _k_forces(self, dt: float) -> ti.types.vector(_NRED, float):
+    def _k_forces(self, dt: float):
         """Accelerations at x^{n+1}, rho^{n+1}: eq 34 (pressure; Morris viscosity with v^{n+1/2}), eq 36,
         eq 54 and gravity; reductions: kinetic energy, max speed, water volume, min h/|a|, min h/c,
         non-finite count, first bad id, min h, air volume."""
@@ -414,20 +434,22 @@ class WCSPHSolver:
         hmin = 1.0e30
         bad = 0.0
         first_bad = 2.0e9
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.fmask[i] == 1:
                 si = self.s[i]
+                qi = self.q[i]
                 xi = self._pos(si)
                 vi = self._vel(si)
-                rhoi = si[self.S_RHO]
-                pri = si[self.S_PR]
+                rhoi = qi[self.Q_RHO]
+                pri = qi[self.Q_PR]
                 pi = pri * rhoi * rhoi
                 mi = si[self.S_M]
                 ki = self.kind[i]
                 voli = mi / rhoi
                 hi = self.h0
                 if ti.static(self.variable_h):
-                    hi = si[self.S_H]
+                    hi = qi[self.Q_H]
                 nui = self._nu(ki)
                 c0i = self._c0(ki)
                 cohi = self._cohesion(ki)
@@ -435,7 +457,10 @@ class WCSPHSolver:
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
-                    hij = self._h_pair(hi, sj)
+                    qj = self.q[j]
+                    hij = self.h0
+                    if ti.static(self.variable_h):
+                        hij = 0.5 * (hi + qj[self.Q_H])
                     rij = xi - self._pos(sj)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * hij * hij or r2 == 0.0:
@@ -445,7 +470,7 @@ class WCSPHSolver:
                     gw = dwdr / r * rij
                     f_ij = isph_terms.laplacian_weight(r, hij, self.eta2, self.dim)
                     kj = sj[self.S_KIND]
-                    prj = sj[self.S_PR]
+                    prj = qj[self.Q_PR]
                     if kj == WALL:
                         # boundary particle: the virtual velocity of eq 50-51, the density of i and the
                         # pressure of i extrapolated hydrostatically to it (Neumann condition)
@@ -463,7 +488,7 @@ class WCSPHSolver:
                             acc -= mj * pij * gw
                     else:
                         vij = vi - self._vel(sj)
-                        rhoj = sj[self.S_RHO]
+                        rhoj = qj[self.Q_RHO]
                         mj = sj[self.S_M]
                         same = True
                         if ti.static(self.has_air):
@@ -502,7 +527,7 @@ class WCSPHSolver:
                 if ti.math.isnan(val) or ti.math.isinf(val):
                     bad += 1.0
                     ti.atomic_min(first_bad, float(self.ids[i]))
-        return ti.Vector([ke, vmax, vol, h_over_a, h_over_c, bad, first_bad, hmin, vol_air])
+        self.red_forces[None] = ti.Vector([ke, vmax, vol, h_over_a, h_over_c, bad, first_bad, hmin, vol_air])
 
     # ------------------------------------------------------------------ step
     def _tick(self, key, t0):
@@ -538,7 +563,8 @@ class WCSPHSolver:
 
     def _forces(self, dt: float):
         t0 = _time.perf_counter()
-        self.red = self._k_forces(dt).to_numpy()
+        self._k_forces(dt)
+        self.red = self.red_forces[None].to_numpy()
         self._tick("forces", t0)
         r = self.red
         self.last = {"kinetic_energy": float(r[0]), "max_speed": float(r[1]), "water_volume": float(r[2]),
@@ -551,7 +577,8 @@ class WCSPHSolver:
 
     def step(self, dt: float) -> dict:
         t0 = _time.perf_counter()
-        d2max, hmax = self._k_kick_drift(dt, self.dt_prev).to_numpy()
+        self._k_kick_drift(dt, self.dt_prev)
+        d2max, hmax = self.red_kick[None].to_numpy()
         if self.variable_h:
             self.hmax = float(hmax)
         self.step_count += 1
