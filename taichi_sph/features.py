@@ -29,4 +29,25 @@ def features(cfg) -> dict:
             "ppe_max_iterations": cfg.isph.ppe.max_iterations,
         },
         "output": {"path": cfg.output.path, "every": cfg.output.every},
+        **_wcsph_features(cfg),
     }
+
+
+def _wcsph_features(cfg) -> dict:
+    """The physics switches of mode wcsph_biot (each a compile-time flag of its solver)."""
+    if cfg.mode != "wcsph_biot":
+        return {}
+    w = cfg.wcsph
+    return {"wcsph": {
+        "materials": ["water"] + (["air"] if cfg.air else []),
+        "density": w.density,
+        "normalise_every": w.normalise_every,
+        "water_sound_speed": cfg.sound_speed(),
+        "artificial_viscosity": w.artificial_viscosity.alpha > 0 or w.artificial_viscosity.beta > 0,
+        "xsph": w.xsph,
+        "variable_h": w.variable_h,
+        "cohesion": {"water": w.water.cohesion, "air": w.air.cohesion},
+        "walls": cfg.tank.boundary,
+        "beta_max": w.beta_max,
+        "release_velocity": w.release_velocity,
+    }}

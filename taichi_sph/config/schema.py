@@ -160,8 +160,9 @@ class ArtificialViscosity(Strict):
 class WCSPH(Strict):
     """Options of mode wcsph_biot (weakly compressible SPH, seed 002)."""
 
-    #: density: `normalised` advances it by continuity (eq 25 in the volume form of eq 48) and then
-    #: normalises it over particles of the same material (eq 27) every step; `continuity` alone
+    #: density: `normalised` advances it by continuity (eq 25 in the volume form of eq 48) and every
+    #: `normalise_every` steps normalises it over particles of the same material (eq 27); `continuity`
+    #: alone (a tank at rest then needs artificial_viscosity.alpha ~0.1: with the seed's 0.001 it goes unstable)
     density: Literal["normalised", "continuity"] = "normalised"
     #: steps between two applications of eq 27 (density: normalised)
     normalise_every: PosInt = 20
@@ -178,6 +179,7 @@ class WCSPH(Strict):
     #: artificial viscosity eq 36
     artificial_viscosity: ArtificialViscosity = ArtificialViscosity()
     #: XSPH coefficient eps_XSPH of eq 53 (0 = off); particles move with v - eps sum_j (m_j / rho_ij) v_ij W_ij
+    #: over their fluid neighbours (air thus moves with the water around it)
     xsph: Annotated[float, Field(ge=0, le=1)] = 0.5
     #: variable smoothing length eq 52 (h follows the divergence; kept within [0.5, 1.1] h0)
     variable_h: bool = True
@@ -192,7 +194,9 @@ class WCSPH(Strict):
 
 
 class TimeStep(Strict):
-    """Limits used when dt = auto: dt = min(cfl dx / u_max, viscous dx^2 / nu, force sqrt(dx / |g|))."""
+    """Limits used when dt = auto: dt = min(cfl dx / u_max, viscous dx^2 / nu, force sqrt(dx / |g|)).
+    Mode wcsph_biot uses the same three coefficients in its eq 49: dt = min(cfl h / c,
+    force sqrt(h / |a|), viscous h^2 / nu) over all particles (h the smoothing length, c the sound speed)."""
 
     cfl: PosFloat = 0.25
     viscous: PosFloat = 0.125
@@ -251,7 +255,7 @@ class Config(Strict):
     obstacles: list[Obstacle] = []
     #: options of mode isph
     isph: ISPH = ISPH()
-    #: air blocks (m), mode wcsph_biot; they displace the water they overlap
+    #: air blocks (m, fields as for `water`), mode wcsph_biot; they displace the water they overlap
     air: list[Box] = []
     #: options of mode wcsph_biot
     wcsph: WCSPH = WCSPH()
