@@ -120,12 +120,12 @@ class WCSPHWater(Strict):
     #: exponent gamma of the Tait equation of state eq 41
     gamma: PosFloat = 7.0
     #: sound speed c0 (m/s) of eq 41; default speed_factor x expected_speed
-    sound_speed: Optional[PosFloat] = None
+    sound_speed: PosFloat | None = None
     #: c0 = speed_factor x expected_speed when sound_speed is not given (at least 10: density varies < 1 %)
     speed_factor: Annotated[float, Field(ge=10)] = 10.0
     #: largest flow speed expected (m/s); default sqrt(2 |g| H), H the height of the highest water or air
     #: block top above the tank floor (the free-fall speed from there)
-    expected_speed: Optional[PosFloat] = None
+    expected_speed: PosFloat | None = None
     #: pseudo surface tension eq 54 as a cohesion pressure P_c (Pa): the seed's a / m^2 = P_c / rho0^2,
     #: acting between particles of this material only; 0 = off
     cohesion: NonNegFloat = 0.0
@@ -362,7 +362,7 @@ def _explicit_keys(model, prefix: str) -> list[str]:
     return sorted(out)
 
 
-def _check_mode_sections(cfg: "Config") -> None:
+def _check_mode_sections(cfg: Config) -> None:
     """Options of the other mode are errors rather than silently ignored."""
     if cfg.mode == "wcsph_biot":
         keys = _explicit_keys(cfg.isph, "isph")
