@@ -50,8 +50,9 @@ DT_CFL, DT_VISCOUS, DT_FORCE = 1, 2, 3
 H_MIN, H_MAX = 0.5, 1.1
 #: reductions returned by the force pass
 _NRED = 9
-#: scenes with fewer fluid particles run their loops serially (measured: a parallel loop over ~800
-#: particles costs ~55 us of thread dispatch, a serial one ~15 us; above ~2000 the threads win)
+#: scenes with fewer fluid particles run their loops serially: thread dispatch costs ~55 us per loop.
+#: Measured per step on 2 cores, serial / parallel: 500 particles 0.44 / 0.67 ms, 1200 0.77 / 0.91 ms,
+#: 2450 equal
 SERIAL_BELOW = 2000
 
 
