@@ -48,3 +48,18 @@ def init(arch: str = "cpu", precision: str = "auto", threads: int | None = None,
         raise InputError(f"--arch {arch}: no usable Taichi backend ({last_err})")
     name = str(chosen[0]).split(".")[-1]
     return {"arch": "cpu" if name in ("x64", "arm64") else name, "precision": chosen[1]}
+
+
+def ids_text(ids, limit: int = 10) -> str:
+    """Particle ids for a message: the first `limit`, then how many in all."""
+    ids = [int(i) for i in ids]
+    text = ", ".join(str(i) for i in ids[:limit])
+    return text + (f", ... ({len(ids)} in all)" if len(ids) > limit else "")
+
+
+def is_f64() -> bool:
+    """Whether the initialised Taichi runtime computes in double precision."""
+    import taichi as ti
+    from taichi.lang import impl
+
+    return impl.get_runtime().default_fp == ti.f64

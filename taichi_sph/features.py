@@ -32,4 +32,25 @@ def features(cfg) -> dict:
         "probes": {p.name: {"type": p.type, "every": p.every or cfg.output.every} for p in cfg.probes},
         "images": (None if cfg.output.images is None else
                    {"every": cfg.output.images.every, "field": cfg.output.images.field}),
+        **_wcsph_features(cfg),
     }
+
+
+def _wcsph_features(cfg) -> dict:
+    """The physics switches of mode wcsph_biot (each a compile-time flag of its solver)."""
+    if cfg.mode != "wcsph_biot":
+        return {}
+    w = cfg.wcsph
+    return {"wcsph": {
+        "materials": ["water"] + (["air"] if cfg.air else []),
+        "density": w.density,
+        "normalise_every": w.normalise_every,
+        "water_sound_speed": cfg.sound_speed(),
+        "artificial_viscosity": w.artificial_viscosity.alpha > 0 or w.artificial_viscosity.beta > 0,
+        "xsph": w.xsph,
+        "variable_h": w.variable_h,
+        "cohesion": {"water": w.water.cohesion, "air": w.air.cohesion},
+        "walls": cfg.tank.boundary,
+        "beta_max": w.beta_max,
+        "release_velocity": w.release_velocity,
+    }}

@@ -22,6 +22,9 @@ log = logging.getLogger("taichi_sph")
 DT_FIXED, DT_CFL, DT_VISCOUS, DT_FORCE, DT_MAX, DT_OUTPUT = range(6)
 DIAG_COLUMNS = ("time", "dt", "kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
                 "wall_seconds", "dt_limit", "free_surface", "collisions")
+#: columns the driver fills itself; the others come from the solver's step() (a solver may name the ones it
+#: reports in `diagnostic_names`, by default all of DIAG_COLUMNS)
+DRIVER_COLUMNS = ("time", "dt", "wall_seconds", "dt_limit")
 
 
 def code_version() -> str:
@@ -44,7 +47,9 @@ class TimeStepper:
         self.fixed = None if cfg.dt == "auto" else float(cfg.dt)
         self.g_abs = g_abs
 
-    def choose(self, max_speed: float) -> tuple[float, int]:
+    def choose(self, max_speed: float, proposal: tuple[float, int] | None = None) -> tuple[float, int]:
+        if proposal is not None:
+            return self.cap_proposal(*proposal)
         if self.fixed is not None:
             return self.fixed, DT_FIXED
         ts, dx = self.cfg.timestep, self.cfg.dx
@@ -59,6 +64,12 @@ class TimeStepper:
             limits[DT_FORCE] = ts.force * math.sqrt(dx / self.g_abs)
         which = min(limits, key=limits.get)
         return max(limits[which], ts.min), which
+
+    def cap_proposal(self, dt: float, limit: int) -> tuple[float, int]:
+        """A step the solver proposes (mode wcsph_biot, eq 49), capped by a number given for `dt` or by
+        timestep.max."""
+        cap, cap_limit = (self.fixed, DT_FIXED) if self.fixed is not None else (self.cfg.timestep.max, DT_MAX)
+        return (cap, cap_limit) if dt >= cap else (dt, limit)
 
 
 class Progress:
@@ -98,17 +109,17 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     scene = build_scene(cfg)
     log.info("%s; arch %s, %s", describe(scene), be["arch"], be["precision"])
 
-    from .isph.solver import ISPHSolver
-
     t_compile = _time.perf_counter()
-    solver = ISPHSolver(cfg, scene)
+    solver = make_solver(cfg, scene)
     stepper = TimeStepper(cfg, solver.g_abs)
+    propose = getattr(solver, "propose_dt", None)  # solvers with their own stability limits
 
     writer = RunWriter(out_path, mode=cfg.mode, dim=cfg.dim, dx=cfg.dx, arch=be["arch"], config_yaml=resolved_yaml(cfg),
                        kind=scene.kind, ids=scene.ids, code_version=code_version(), markers=_markers_out(scene),
                        attrs={"precision": be["precision"], "particle_mass": solver.mass, "rho_w": solver.rho_w,
                               "n_water": solver.n_water, "support_radius": solver.re, "status": "running"})
-    diag = {k: [] for k in DIAG_COLUMNS}
+    reported = getattr(solver, "diagnostic_names", DIAG_COLUMNS)
+    diag = {k: [] for k in DIAG_COLUMNS if k in DRIVER_COLUMNS or k in reported}
     summary = {"out": str(out_path), "arch": be["arch"], "steps": 0, "status": "running"}
     extras = RunExtras(cfg, writer, out_path, scene.kind, solver.mass, solver.rho_w)
     progress_bar = Progress(cfg.end_time, progress)
@@ -124,7 +135,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
         every = cfg.output.every
         next_out = every
         t = 0.0
-        n_fixed = None if stepper.fixed is None else int(round(cfg.end_time / stepper.fixed))
+        n_fixed = None if stepper.fixed is None or propose is not None else int(round(cfg.end_time / stepper.fixed))
         speed_bound = solver.max_speed_bound()
         last = first
         while True:
@@ -133,7 +144,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                     break
             elif t >= cfg.end_time * (1 - 1e-12):
                 break
-            dt, limit = stepper.choose(last["max_speed"])
+            dt, limit = stepper.choose(last["max_speed"], propose() if propose is not None else None)
             if n_fixed is None:
                 dt, limit = land_on(t, dt, limit, min(next_out, cfg.end_time))
             s0 = _time.perf_counter()
@@ -142,12 +153,9 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             step_wall += s1 - s0
             t = solver.step_count * stepper.fixed if n_fixed is not None else t + dt
             solver.time = t
-            for key, val in (("time", t), ("dt", dt), ("kinetic_energy", last["kinetic_energy"]),
-                             ("max_speed", last["max_speed"]), ("water_volume", last["water_volume"]),
-                             ("cg_iterations", last["cg_iterations"]), ("cg_residual", last["cg_residual"]),
-                             ("wall_seconds", s1 - s0), ("dt_limit", limit), ("free_surface", last["free_surface"]),
-                             ("collisions", last["collisions"])):
-                diag[key].append(val)
+            driver = {"time": t, "dt": dt, "wall_seconds": s1 - s0, "dt_limit": limit}
+            for key, column in diag.items():
+                column.append(driver[key] if key in driver else last[key])
             if last["max_speed"] > speed_bound:
                 pid = _fastest_particle(solver)
                 raise InstabilityError(
@@ -162,7 +170,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                 while next_out <= t + 1e-9 * every:
                     next_out += every
             progress_bar.update(t, solver.step_count / max(step_wall, 1e-9),
-                                f", CG {last['cg_iterations']}")
+                                f", CG {last['cg_iterations']}" if "cg_iterations" in last else f", dt {dt:.3g} s")
         summary["status"] = "completed"
     except InstabilityError as exc:
         summary["status"] = "unstable"
@@ -182,7 +190,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
         writer.set_attrs(setup_seconds=summary.get("compile_and_setup_seconds"), phase_seconds=dict(solver.timers))
         wall = _time.perf_counter() - wall0
         steps = solver.step_count
-        psps = solver.n_water * steps / step_wall if step_wall > 0 else 0.0
+        psps = getattr(solver, "n_fluid", solver.n_water) * steps / step_wall if step_wall > 0 else 0.0
         summary.update(steps=steps, wall_seconds=wall, step_seconds=step_wall, mipps=psps / 1e6,
                        removed_particles=solver.removed_total, phase_seconds=dict(solver.timers))
         writer.set_attrs(status=summary["status"], exit_reason=summary.get("error", ""), steps=steps,
@@ -193,6 +201,18 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     if volume0 > 0:
         summary["volume_drift"] = last["water_volume"] / volume0 - 1.0
     return summary
+
+
+def make_solver(cfg, scene):
+    """The solver of the config's mode (each keeps the same interface: step(dt) -> diagnostics,
+    initial_diagnostics(), fields_by_id(), max_speed_bound(), timers, step_count, time, ...)."""
+    if cfg.mode == "wcsph_biot":
+        from .wcsph.solver import WCSPHSolver
+
+        return WCSPHSolver(cfg, scene)
+    from .isph.solver import ISPHSolver
+
+    return ISPHSolver(cfg, scene)
 
 
 def land_on(t: float, dt: float, limit: int, target: float) -> tuple[float, int]:

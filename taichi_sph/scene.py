@@ -231,10 +231,18 @@ def build_scene(cfg) -> Scene:
         wall = np.concatenate([wall, pts])
         wall_n = np.concatenate([wall_n, nrm])
     water = water[remove_overlaps(water, wall, 0.5 * dx)]
+    air = np.zeros((0, dim))
+    for box in getattr(cfg, "air", []):  # air blocks displace the water they overlap
+        pts = lattice_in_box(box.min, box.max, dx)
+        pts = pts[remove_overlaps(pts, air, 0.5 * dx) & remove_overlaps(pts, wall, 0.5 * dx)]
+        air = np.concatenate([air, pts])
+    water = water[remove_overlaps(water, air, 0.5 * dx)]
 
     position = np.concatenate([water, wall])
     kind = np.concatenate([np.full(len(water), WATER, np.int8), np.full(len(wall), WALL, np.int8)])
     normal = np.concatenate([np.zeros_like(water), wall_n])
+    position, normal = np.concatenate([position, air]), np.concatenate([normal, np.zeros_like(air)])
+    kind = np.concatenate([kind, np.full(len(air), AIR, np.int8)])
 
     r_e = SUPPORT_FACTOR * dx
     lo = -(layers + 1) * dx * np.ones(dim)

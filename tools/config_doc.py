@@ -29,6 +29,8 @@ SECTIONS = [("Config", "top level"), ("Output", "output"), ("Images", "output.im
             ("Fluid", "fluid"), ("Tank", "tank"),
             ("Box", "water[k] and obstacles[k]"), ("ISPH", "isph"), ("PPESolver", "isph.ppe"),
             ("TimeStep", "timestep"), ("Neighbours", "neighbours"), ("Guard", "guard")]
+SECTIONS += [("WCSPH", "wcsph"), ("WCSPHWater", "wcsph.water"), ("WCSPHAir", "wcsph.air"),
+             ("ArtificialViscosity", "wcsph.artificial_viscosity")]
 
 FOOTER = """## Fixed names
 

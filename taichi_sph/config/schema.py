@@ -229,8 +229,89 @@ class ISPH(Strict):
     advection: Literal["pore", "darcy"] = "pore"
 
 
+class WCSPHWater(Strict):
+    """Water in mode wcsph_biot (its density and viscosity are `fluid.density` and `fluid.viscosity`)."""
+
+    #: exponent gamma of the Tait equation of state eq 41
+    gamma: PosFloat = 7.0
+    #: sound speed c0 (m/s) of eq 41; default speed_factor x expected_speed
+    sound_speed: PosFloat | None = None
+    #: c0 = speed_factor x expected_speed when sound_speed is not given (at least 10: density varies < 1 %)
+    speed_factor: Annotated[float, Field(ge=10)] = 10.0
+    #: largest flow speed expected (m/s); default sqrt(2 |g| H), H the height of the highest water or air
+    #: block top above the tank floor (the free-fall speed from there)
+    expected_speed: PosFloat | None = None
+    #: pseudo surface tension eq 54 as a cohesion pressure P_c (Pa): the seed's a / m^2 = P_c / rho0^2,
+    #: acting between particles of this material only; 0 = off
+    cohesion: NonNegFloat = 0.0
+
+
+class WCSPHAir(Strict):
+    """Air in mode wcsph_biot: gas equation of state eq 39-40."""
+
+    #: air density at the ambient pressure (kg/m^3) (seed: 1.207)
+    density: PosFloat = 1.207
+    #: kinematic viscosity (m^2/s) (seed: mu = 1.810e-5 Pa s, / 1.207 kg/m^3)
+    viscosity: NonNegFloat = 1.5e-5
+    #: ratio of specific heats gamma_gas of eq 40 (seed: 1.403)
+    gamma: PosFloat = 1.403
+    #: pseudo surface tension eq 54 as a cohesion pressure P_c (Pa), between air particles; 0 = off
+    cohesion: NonNegFloat = 0.0
+
+
+class ArtificialViscosity(Strict):
+    """Monaghan artificial viscosity eq 36: Pi_ij = (-alpha c_ij mu_ij + beta mu_ij^2) / rho_ij for
+    approaching pairs, mu_ij = h_ij v_ij . r_ij / (r_ij^2 + eps h_ij^2); between particles of one
+    material and between fluid and wall particles."""
+
+    #: alpha of eq 36 (seed: 0.001)
+    alpha: NonNegFloat = 0.001
+    #: beta of eq 36 (seed: 0)
+    beta: NonNegFloat = 0.0
+    #: eps_AF of eq 36 (seed: 0.1)
+    eps: PosFloat = 0.1
+
+
+class WCSPH(Strict):
+    """Options of mode wcsph_biot (weakly compressible SPH, seed 002)."""
+
+    #: density: `normalised` advances it by continuity (eq 25 in the volume form of eq 48) and every
+    #: `normalise_every` steps normalises it over particles of the same material (eq 27); `continuity`
+    #: alone (a tank at rest then needs artificial_viscosity.alpha ~0.1: with the seed's 0.001 it goes unstable)
+    density: Literal["normalised", "continuity"] = "normalised"
+    #: steps between two applications of eq 27 (density: normalised)
+    normalise_every: PosInt = 20
+    #: initial water density: `hydrostatic` (from the weight of the fluid above each particle through the
+    #: EOS, the run starts at rest in equilibrium) or `uniform` (fluid.density everywhere, as the seed's
+    #: collapse cases). Air always starts at the density of the gas EOS at its depth.
+    initial_density: Literal["hydrostatic", "uniform"] = "hydrostatic"
+    #: ambient (absolute) pressure p0 above the free surface (Pa); pressures written are relative to it
+    ambient_pressure: PosFloat = 1.0e5
+    #: water equation of state and surface tension
+    water: WCSPHWater = WCSPHWater()
+    #: air properties
+    air: WCSPHAir = WCSPHAir()
+    #: artificial viscosity eq 36
+    artificial_viscosity: ArtificialViscosity = ArtificialViscosity()
+    #: XSPH coefficient eps_XSPH of eq 53 (0 = off); particles move with v - eps sum_j (m_j / rho_ij) v_ij W_ij
+    #: over their fluid neighbours (air thus moves with the water around it)
+    xsph: Annotated[float, Field(ge=0, le=1)] = 0.5
+    #: variable smoothing length eq 52 (h follows the divergence; kept within [0.5, 1.1] h0)
+    variable_h: bool = True
+    #: upper bound beta_max of the boundary-particle factor beta of eq 51 (seed: 2)
+    beta_max: Annotated[float, Field(ge=1)] = 2.0
+    #: initial velocity: `right_face` gives the rightmost particle column of each water block the speed
+    #: sqrt(2 |g| (H - y)) along +x, H the block top (seed section 3.1); `none` starts at rest
+    release_velocity: Literal["none", "right_face"] = "none"
+    #: neighbour lists hold pairs up to (1 + skin) x the support radius and are rebuilt only when some
+    #: particle has moved far enough to need it (performance; results do not depend on it)
+    neighbour_skin: Annotated[float, Field(ge=0, le=0.5)] = 0.2
+
+
 class TimeStep(Strict):
-    """Limits used when dt = auto: dt = min(cfl dx / u_max, viscous dx^2 / nu, force sqrt(dx / |g|))."""
+    """Limits used when dt = auto: dt = min(cfl dx / u_max, viscous dx^2 / nu, force sqrt(dx / |g|)).
+    Mode wcsph_biot uses the same three coefficients in its eq 49: dt = min(cfl h / c,
+    force sqrt(h / |a|), viscous h^2 / nu) over all particles (h the smoothing length, c the sound speed)."""
 
     cfl: PosFloat = 0.25
     viscous: PosFloat = 0.125
@@ -264,7 +345,8 @@ class Config(Strict):
     dx: PosFloat
     #: simulated time (s)
     end_time: PosFloat
-    #: time step (s) or auto (CFL-adaptive, see `timestep`)
+    #: time step (s) or auto (CFL-adaptive, see `timestep`). Mode wcsph_biot always takes the adaptive
+    #: step of its eq 49 (limits `timestep.cfl`, `force`, `viscous`); a number caps that step
     dt: Union[PosFloat, Literal["auto"]] = 0.001
     #: Taichi backend
     arch: Literal["cpu", "cuda", "vulkan", "auto"] = "cpu"
@@ -292,6 +374,10 @@ class Config(Strict):
     soil: Soil = Soil()
     #: options of mode isph
     isph: ISPH = ISPH()
+    #: air blocks (m, fields as for `water`), mode wcsph_biot; they displace the water they overlap
+    air: list[Box] = []
+    #: options of mode wcsph_biot
+    wcsph: WCSPH = WCSPH()
     #: adaptive time-step limits (dt = auto)
     timestep: TimeStep = TimeStep()
     #: neighbour-list capacity
@@ -321,6 +407,21 @@ class Config(Strict):
         if self.neighbours.max is not None:
             return self.neighbours.max
         return 160 if self.dim == 3 else 64
+
+    def expected_speed(self) -> float:
+        """Largest flow speed expected in mode wcsph_biot (m/s): the key, or the free-fall speed from the
+        highest water or air block top."""
+        if self.wcsph.water.expected_speed is not None:
+            return self.wcsph.water.expected_speed
+        g = sum(c * c for c in self.gravity_vector()) ** 0.5
+        top = max(box.max[-1] for box in [*self.water, *self.air])
+        return max((2.0 * g * top) ** 0.5, 1.0e-3)
+
+    def sound_speed(self) -> float:
+        """Sound speed c0 of the water equation of state (m/s), mode wcsph_biot."""
+        if self.wcsph.water.sound_speed is not None:
+            return self.wcsph.water.sound_speed
+        return self.wcsph.water.speed_factor * self.expected_speed()
 
 
 def check(cfg: "Config") -> None:
@@ -352,8 +453,11 @@ def check(cfg: "Config") -> None:
         _fail("tank.periodic", "periodic boundaries are not implemented yet; use slip walls")
     if min(cfg.tank.size) < 2 * cfg.dx:
         _fail("tank.size", f"every side must hold at least 2 particles of dx = {cfg.dx}")
-    if cfg.mode == "wcsph_biot":
-        _fail("mode", "wcsph_biot is not available in this version; use isph")
+    for k, box in enumerate(cfg.air):
+        _need_len(box.min, d, f"air[{k}].min")
+        _need_len(box.max, d, f"air[{k}].max")
+        _inside(box, cfg.tank.size, f"air[{k}]")
+    _check_mode_sections(cfg)
     if isinstance(cfg.dt, float) and cfg.output.every < cfg.dt:
         _fail("output.every", f"must be at least dt = {cfg.dt}")
     if isinstance(cfg.dt, float) and cfg.dt >= cfg.end_time:
@@ -429,3 +533,39 @@ def _check_images(cfg: "Config") -> None:
         _fail("output.images.camera", f"a 2D run is drawn in its plane: use front or auto, not {images.camera}")
     if cfg.dim == 2 and images.field == "velocity_z":
         _fail("output.images.field", "a 2D run has no velocity_z (its axes are x and y)")
+
+
+def _explicit_keys(model, prefix: str) -> list[str]:
+    """Dotted names of the keys set explicitly (in the file, a variant or --set) inside a section."""
+    out = []
+    for name in model.model_fields_set:
+        value = getattr(model, name)
+        if isinstance(value, BaseModel):
+            inner = _explicit_keys(value, f"{prefix}.{name}")
+            out.extend(inner or [f"{prefix}.{name}"])
+        else:
+            out.append(f"{prefix}.{name}")
+    return sorted(out)
+
+
+def _check_mode_sections(cfg: Config) -> None:
+    """Options of the other mode are errors rather than silently ignored."""
+    if cfg.mode == "wcsph_biot":
+        keys = _explicit_keys(cfg.isph, "isph") + _explicit_keys(cfg.soil, "soil")
+        if keys:
+            _fail(keys[0], "applies to mode isph only (mode is wcsph_biot)")
+        for k, block in enumerate(cfg.water):
+            if block.porosity != 1.0:
+                _fail(f"water[{k}].porosity", "applies to mode isph only (mode is wcsph_biot)")
+        if cfg.fluid.turbulence != "none":
+            _fail("fluid.turbulence", f"{cfg.fluid.turbulence} is available in mode isph only")
+        c0, u = cfg.sound_speed(), cfg.expected_speed()
+        if cfg.wcsph.water.sound_speed is not None and c0 < 10.0 * u:
+            _fail("wcsph.water.sound_speed", f"{c0:g} m/s is below 10 x the expected speed {u:.4g} m/s "
+                  "(wcsph.water.expected_speed); density would vary by more than 1 %")
+    else:
+        keys = _explicit_keys(cfg.wcsph, "wcsph")
+        if keys:
+            _fail(keys[0], f"applies to mode wcsph_biot only (mode is {cfg.mode})")
+        if cfg.air:
+            _fail("air", f"air blocks need mode wcsph_biot (mode is {cfg.mode})")

@@ -23,13 +23,13 @@ import time as _time
 import numpy as np
 import taichi as ti
 
+from ..backend import ids_text, is_f64
 from ..errors import InstabilityError
 from ..linalg.sparse_cg import SparseCGSolver
 from ..scene import WALL, WATER
-from ..sph import kernels
+from ..sph import kernels, operators
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
 from . import porosity as _porosity
-from . import terms
 
 log = logging.getLogger("taichi_sph")
 
@@ -114,7 +114,7 @@ class ISPHSolver:
         self.g = vec(self.g_np.tolist())
         self.particle_fields = [self.x, self.v, self.normal, self.p, self.eps, self.kind, self.ids, self.active]
 
-        self.np_fp = np.float64 if _is_f64() else np.float32
+        self.np_fp = np.float64 if is_f64() else np.float32
         self.x.from_numpy(scene.position.astype(self.np_fp))
         self.normal.from_numpy(scene.normal.astype(self.np_fp))
         self.kind.from_numpy(scene.kind.astype(np.int32))
@@ -137,7 +137,7 @@ class ISPHSolver:
             # eq 34 in the ground: N_i < N_surf N(eps) / N(1), N(eps) the pore lattice's count
             self.nsurf_tab = ti.field(float, len(eps_tab))
             self.nsurf_tab.from_numpy((self.n_surf * n_tab / n_tab[-1]).astype(self.np_fp))
-        fp = ti.f64 if _is_f64() else ti.f32
+        fp = ti.f64 if is_f64() else ti.f32
         self.ppe = SparseCGSolver(max(self.n_water, 1), max(self.n_water, 1) * (self.max_nb + 1), fp,
                                   cfg.isph.ppe.tolerance, cfg.isph.ppe.max_iterations)
         self.dirichlet_scale = self._lattice_laplacian_sum()
@@ -293,7 +293,7 @@ class ISPHSolver:
                     vj = self.v[j]
                     vol = self.mass / self.rho_w
                     if self.kind[j] == WALL:
-                        vj = terms.mirror_velocity(vi, self.normal[j], self.no_slip)
+                        vj = operators.mirror_velocity(vi, self.normal[j], self.no_slip)
                     else:
                         vol = self.mass / (self.eps[j] * self.rho_w)
                     if r > 0.0:
@@ -330,20 +330,20 @@ class ISPHSolver:
                     rij = xi - self.x[j]
                     r = rij.norm()
                     if r > 0.0:
-                        f = terms.laplacian_weight(r, self.h, self.eta2, self.dim)
+                        f = operators.laplacian_weight(r, self.h, self.eta2, self.dim)
                         vj = self.v[j]
                         rb_j = rb_i
                         nu_j = nu_i
                         m_j = eps_i * self.mass
                         if self.kind[j] == WALL:
-                            vj = terms.mirror_velocity(vi, self.normal[j], self.no_slip)
+                            vj = operators.mirror_velocity(vi, self.normal[j], self.no_slip)
                         else:
                             m_j = self.mass
                             rb_j = self.eps[j] * self.rho_w
                             nu_j = self.nu / self.eps[j]
                             if ti.static(self.turbulence):
                                 nu_j += self.nu_t[j] / self.eps[j]
-                        lap += terms.variable_laplacian_pair(m_j, rb_i, nu_i, rb_j, nu_j, f) * (vi - vj)
+                        lap += operators.variable_laplacian_pair(m_j, rb_i, nu_i, rb_j, nu_j, f) * (vi - vj)
                 c = eps_i * dt
                 drag = 1.0
                 if ti.static(self.porous):
@@ -384,17 +384,17 @@ class ISPHSolver:
                         r = rij.norm()
                         if r > 0.0:
                             gw = kernels.grad_w(rij, r, self.h, self.dim)
-                            f = terms.laplacian_weight(r, self.h, self.eta2, self.dim)
+                            f = operators.laplacian_weight(r, self.h, self.eta2, self.dim)
                             if self.kind[j] == WALL:
-                                vj = terms.mirror_velocity(vi, self.normal[j], self.no_slip)
+                                vj = operators.mirror_velocity(vi, self.normal[j], self.no_slip)
                                 m_w = eps_i * self.mass
                                 div += m_w * (vj - vi).dot(gw)
-                                K = -terms.variable_laplacian_pair(m_w, rb_i, k_i, rb_i, k_i, f)
+                                K = -operators.variable_laplacian_pair(m_w, rb_i, k_i, rb_i, k_i, f)
                                 rhs += K * self.rho_w * self.g.dot(self.x[j] - xi)
                             else:
                                 div += self.mass * (self.vstar[j] - vi).dot(gw)
                                 rb_j = self.eps[j] * self.rho_w
-                                K = -terms.variable_laplacian_pair(self.mass, rb_i, k_i, rb_j, self.kcoef[j], f)
+                                K = -operators.variable_laplacian_pair(self.mass, rb_i, k_i, rb_j, self.kcoef[j], f)
                                 diag += K
                                 if self.free[j] == 1 or self.solve_mask[j] == 0:
                                     rhs += K * self._dirichlet_value(j)
@@ -455,7 +455,7 @@ class ISPHSolver:
                     if self.kind[j] == WALL:
                         r = (xi - self.x[j]).norm()
                         wij = kernels.w(r, self.h, self.dim)
-                        ti.atomic_add(self.wall_acc[j], wij * terms.wall_pressure(self.p[i], self.rho_w, self.g,
+                        ti.atomic_add(self.wall_acc[j], wij * operators.wall_pressure(self.p[i], self.rho_w, self.g,
                                                                                    self.x[j], xi))
                         ti.atomic_add(self.wall_wsum[j], wij)
         for i in range(self.n):
@@ -610,10 +610,10 @@ class ISPHSolver:
             if self.cfg.guard.out_of_domain == "error":
                 raise InstabilityError(
                     f"step {self.step_count}, t = {self.time:.6g} s: {len(removed)} particle(s) left the domain "
-                    f"(ids {_ids_text(ids)})", step=self.step_count, time=self.time, quantity="position",
+                    f"(ids {ids_text(ids)})", step=self.step_count, time=self.time, quantity="position",
                     particles=ids)
             log.warning("step %d, t = %.6g s: removed %d particle(s) that left the domain (ids %s); %d removed so far",
-                        self.step_count, self.time, len(removed), _ids_text(ids), self.removed_total)
+                        self.step_count, self.time, len(removed), ids_text(ids), self.removed_total)
         for f in self.particle_fields:
             self.grid.reorder(f, self.n)
         self._k_rows()
@@ -723,15 +723,3 @@ class ISPHSolver:
 
 def _spline(q: float) -> float:
     return float(kernels.w_np(q * 1.0, 1.0, 1) / kernels.sigma(1, 1.0))
-
-
-def _ids_text(ids, limit=10) -> str:
-    ids = [int(i) for i in ids]
-    text = ", ".join(str(i) for i in ids[:limit])
-    return text + (f", ... ({len(ids)} in all)" if len(ids) > limit else "")
-
-
-def _is_f64() -> bool:
-    from taichi.lang import impl
-
-    return impl.get_runtime().default_fp == ti.f64

@@ -69,6 +69,23 @@ def dw_dr(r, h, dim: ti.template()):
 
 
 @ti.func
+def w_and_dw_dr(r, h, dim: ti.template()):
+    """Kernel value W and radial derivative dW/dr together, for 0 <= r < 2 h (one branch on q)."""
+    q = r / h
+    s = _sigma(h, dim)
+    val = 0.0
+    der = 0.0
+    if q < 1.0:
+        val = s * (1.0 - 1.5 * q * q + 0.75 * q * q * q)
+        der = s / h * (-3.0 * q + 2.25 * q * q)
+    else:
+        t = 2.0 - q
+        val = s * 0.25 * t * t * t
+        der = -s / h * 0.75 * t * t
+    return val, der
+
+
+@ti.func
 def grad_w(rij, r, h, dim: ti.template()):
     """Gradient of W with respect to x_i, with rij = x_i - x_j and r = |rij| > 0."""
     return dw_dr(r, h, dim) * rij / r

@@ -1,4 +1,5 @@
-"""Physics terms of the stabilized ISPH scheme (seed 000), each a small ti.func citing its equation.
+"""SPH pair operators shared by both modes (Laplacian pair factors, wall mirror velocity and pressure),
+each a small ti.func citing its equation in seed 000.
 
 Notation: i the particle, j a neighbour, rij = x_i - x_j, F_ij = rij . grad W_ij / (r^2 + eta^2)
 (< 0), V_j = m_j / rho_bar_j, rho_bar = eps rho_w (eq 33).
@@ -6,7 +7,7 @@ Notation: i the particle, j a neighbour, rij = x_i - x_j, F_ij = rij . grad W_ij
 
 import taichi as ti
 
-from ..sph import kernels
+from . import kernels
 
 
 @ti.func

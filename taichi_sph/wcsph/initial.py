@@ -1,0 +1,95 @@
+"""Initial state of mode wcsph_biot (numpy, before any kernel runs): densities, masses, velocities
+and the depth of wall particles behind the wall surface.
+
+- Pressure at start: the weight of the fluid above each particle in its lattice column,
+  p_i = |g| dx (sum_{j above i} rho0_j + rho0_i / 2) (gauge, the ambient p0 acts on the surface). Air
+  takes the density of the gas EOS (eq 39-40) at that pressure, as the seed sets its bubble from the
+  100 kPa overburden plus the water above it; water takes the Tait density (eq 41) at that pressure
+  (`initial_density: hydrostatic`) or rho0 (`uniform`, the seed's collapse cases).
+- Mass m_i = rho_i dx^dim, so that every particle starts with the lattice volume dx^dim.
+- `release_velocity: right_face`: the rightmost particle column of each water block moves along +x
+  with sqrt(2 |g| (H - y)), H the block top (seed section 3.1).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene import AIR, WALL, WATER
+from . import eos
+
+
+def column_pressure(position: np.ndarray, rho0: np.ndarray, dx: float, g_down: float) -> np.ndarray:
+    """Hydrostatic gauge pressure of each point from the points above it in the same lattice column
+    (columns binned by floor(horizontal / dx)); rho0 is each point's reference density."""
+    n = len(position)
+    if n == 0 or g_down <= 0.0:
+        return np.zeros(n)
+    horizontal = np.floor(position[:, :-1] / dx).astype(np.int64)
+    _, column = np.unique(horizontal, axis=0, return_inverse=True)
+    column = column.reshape(-1)
+    order = np.lexsort((-position[:, -1], column))  # by column, top first
+    weight = rho0[order] * g_down * dx
+    total = np.cumsum(weight)
+    col_sorted = column[order]
+    first = np.r_[0, np.nonzero(np.diff(col_sorted))[0] + 1]
+    start = np.repeat(np.r_[0.0, total[first[1:] - 1]], np.diff(np.r_[first, n]))
+    above = total - weight - start
+    p = np.empty(n)
+    p[order] = above + 0.5 * weight
+    return p
+
+
+def wall_depth(position: np.ndarray, kind: np.ndarray, tank_size, obstacles) -> np.ndarray:
+    """d_B of eq 51 for wall particles (0 for others): the distance of a tank-wall particle from the
+    tank interior [0, size], or of an obstacle particle from the nearest face of its obstacle."""
+    size = np.asarray(tank_size, float)
+    depth = np.zeros(len(position))
+    wall = kind == WALL
+    p = position[wall]
+    d = np.linalg.norm(p - np.clip(p, 0.0, size), axis=1)
+    inside = d == 0.0
+    for box in obstacles:
+        lo, hi = np.asarray(box.min, float), np.asarray(box.max, float)
+        within = inside & np.all((p >= lo) & (p <= hi), axis=1)
+        face = np.minimum(p[within] - lo, hi - p[within]).min(axis=1)
+        d[within] = face
+    depth[wall] = d
+    return depth
+
+
+def initial_state(cfg, scene, materials: dict) -> dict:
+    """Density, mass and velocity of every particle (walls: rho0 of water, no mass used, at rest).
+
+    `materials` maps a kind to its (rho0, B, gamma). Returns arrays `density`, `mass`, `velocity`,
+    `pressure` (gauge) and `wall_depth`."""
+    dim, dx = cfg.dim, cfg.dx
+    g = np.asarray(cfg.gravity_vector(), float)
+    kind = scene.kind
+    fluid = (kind == WATER) | (kind == AIR)
+    rho_ref = np.full(scene.n, materials[WATER][0])
+    for k, (rho0, _, _) in materials.items():
+        rho_ref[kind == k] = rho0
+    p = np.zeros(scene.n)
+    p[fluid] = column_pressure(scene.position[fluid], rho_ref[fluid], dx, -g[-1])
+    rho = rho_ref.copy()
+    for k, (rho0, b, gamma) in materials.items():
+        sel = kind == k
+        if k == WATER and cfg.wcsph.initial_density == "uniform":
+            p[sel] = 0.0
+            continue
+        rho[sel] = eos.density_np(p[sel], rho0, b, gamma)
+    mass = rho * dx**dim
+    vel = np.zeros((scene.n, dim))
+    if cfg.wcsph.release_velocity == "right_face":
+        g_down = max(-g[-1], 0.0)
+        x = scene.position
+        for box in cfg.water:
+            lo, hi = np.asarray(box.min), np.asarray(box.max)
+            inside = (kind == WATER) & np.all((x >= lo - 1e-12) & (x <= hi + 1e-12), axis=1)
+            if not inside.any():
+                continue
+            face = inside & (x[:, 0] > x[inside, 0].max() - 0.5 * dx)
+            vel[face, 0] = np.sqrt(2.0 * g_down * np.maximum(hi[-1] - x[face, -1], 0.0))
+    return {"density": rho, "mass": mass, "velocity": vel, "pressure": p,
+            "wall_depth": wall_depth(scene.position, kind, cfg.tank.size, cfg.obstacles)}

@@ -1,0 +1,650 @@
+"""Weakly compressible SPH step of mode wcsph_biot (seed 002 sections 2.3-2.6): water and air.
+
+State per fluid particle: position x, leap-frog velocity v (at half steps), density rho, gauge
+pressure p, smoothing length h, mass m, kind (water 0, air 3). Wall particles (kind 1) are fixed
+boundary particles with the Morris/Takeda virtual velocity (eq 50-51). One step of length
+dt = Delta t^n starts from the accelerations a^n of the previous step (or `initial_diagnostics`):
+
+1. kick-drift (leap-frog, eq 48): v^{n+1/2} = v^{n-1/2} + (Delta t^{n-1} + Delta t^n) / 2 a^n,
+   x^{n+1} = x^n + Delta t (v^{n+1/2} + XSPH correction of eq 53).
+2. neighbour lists, rebuilt only when some particle has moved far enough to need it (Verlet skin).
+3. density pass at x^{n+1} with v^{n+1/2}: divergence D_i (eq 25 in volume form), rho^{n+1} =
+   rho^n (1 - D_i Delta t) (eq 48), h^{n+1} = h^n (1 + D_i Delta t / d) (eq 52), the XSPH correction,
+   every `normalise_every` steps eq 27 (normalised density over the same material) applied first;
+   pressure from the equations of state (eq 39-41). Advancing the density with the velocity that
+   moved the particles keeps the (density, velocity) pair symplectic; rates from the previous force
+   pass (one pass per step) make the acoustic modes grow like forward Euler and blow up a tank at rest.
+4. force pass: eq 34 (pressure, Morris viscosity), eq 36 (artificial viscosity), eq 54 (cohesion),
+   gravity; a wall particle seen from fluid particle i has the velocity of eq 50-51, the density of i
+   and the pressure of i extrapolated hydrostatically, p_i + rho_i g . (x_w - x_i); the reductions
+   eq 49 and the diagnostics need, returned as one small vector (the
+   only transfer to the host per step besides the list-rebuild test).
+
+The two pair loops read each neighbour from one packed vector (x, v, rho, p / rho^2, m, kind[, h]): one
+contiguous load per neighbour instead of six. Physics a scene does not use is compiled out with
+ti.static flags (air, cohesion, artificial viscosity, XSPH, variable h). Soil (eq 35, 37-45) and Biot
+drag (eq 46-47) are meant to join as further kinds in the same pair loops behind flags of their own.
+"""
+
+import logging
+import math
+import time as _time
+
+import numpy as np
+import taichi as ti
+
+from ..errors import InstabilityError
+from ..sph import operators
+from ..backend import ids_text, is_f64
+from ..scene import AIR, WALL, WATER
+from ..sph import kernels
+from ..sph.grid import NeighbourGrid, NeighbourOverflowError
+from . import eos, terms
+from .initial import initial_state
+
+log = logging.getLogger("taichi_sph")
+
+#: dt_limit codes, shared with run.py (1 acoustic CFL, 2 viscous, 3 force)
+DT_CFL, DT_VISCOUS, DT_FORCE = 1, 2, 3
+#: smoothing length bounds of eq 52, in units of h0 (the neighbour grid is sized for the upper one)
+H_MIN, H_MAX = 0.5, 1.1
+#: reductions returned by the force pass
+_NRED = 9
+#: scenes with fewer fluid particles run their loops serially: thread dispatch costs ~55 us per loop.
+#: Measured per step on 2 cores, serial / parallel: 500 particles 0.44 / 0.67 ms, 1200 0.77 / 0.91 ms,
+#: 2450 equal
+SERIAL_BELOW = 2000
+
+
+@ti.data_oriented
+class WCSPHSolver:
+    """State and step of mode `wcsph_biot` for water and air. Built from a validated Config and a Scene."""
+
+    #: per-step diagnostics this solver reports (run.py adds time, dt, wall_seconds, dt_limit)
+    diagnostic_names = ("kinetic_energy", "max_speed", "water_volume")
+
+    def __init__(self, cfg, scene):
+        self.cfg = cfg
+        w = cfg.wcsph
+        self.dim = dim = cfg.dim
+        self.dx = dx = cfg.dx
+        self.re = kernels.SUPPORT_FACTOR * dx
+        self.h0 = 0.5 * self.re
+        self.eta2 = 0.01 * self.h0**2  # Morris et al. (1997): 0.01 h^2 keeps 1 / r finite
+        self.vol0 = dx**dim
+        self.g_np = np.asarray(cfg.gravity_vector(), dtype=float)
+        self.g_abs = float(np.linalg.norm(self.g_np))
+        self.g = ti.types.vector(dim, float)(self.g_np.tolist())
+
+        # materials: kind -> (rho0, B, gamma); sound speeds c0; viscosities nu; cohesion a / m^2
+        self.p_amb = w.ambient_pressure
+        self.rho_w = cfg.fluid.density
+        self.c_w = cfg.sound_speed()
+        self.gamma_w = _exponent(w.water.gamma)
+        self.b_w = eos.tait_modulus(self.rho_w, self.c_w, self.gamma_w)
+        self.nu_w = cfg.fluid.viscosity
+        self.rho_a = w.air.density
+        self.gamma_a = _exponent(w.air.gamma)
+        self.b_a = self.p_amb
+        self.c_a = math.sqrt(self.gamma_a * self.b_a / self.rho_a)
+        self.nu_a = w.air.viscosity
+        self.coh_w = w.water.cohesion / self.rho_w**2
+        self.coh_a = w.air.cohesion / self.rho_a**2
+        self.materials = {WATER: (self.rho_w, self.b_w, self.gamma_w), AIR: (self.rho_a, self.b_a, self.gamma_a)}
+
+        # ti.static switches: a scene compiles only what it uses
+        self.n = n = scene.n
+        self.n_water = scene.count(WATER)
+        self.n_air = scene.count(AIR)
+        self.n_fluid = self.n_water + self.n_air
+        self.n_wall = scene.count(WALL)
+        self.has_air = self.n_air > 0
+        self.cohesion_on = (self.coh_w > 0.0 and self.n_water > 0) or (self.coh_a > 0.0 and self.has_air)
+        self.av_alpha = w.artificial_viscosity.alpha
+        self.av_beta = w.artificial_viscosity.beta
+        self.av_eps = w.artificial_viscosity.eps
+        self.av_on = self.av_alpha > 0.0 or self.av_beta > 0.0
+        self.xsph_eps = w.xsph
+        self.xsph_on = self.xsph_eps > 0.0
+        self.variable_h = w.variable_h
+        self.normalised = w.density == "normalised"
+        self.normalise_every = w.normalise_every
+        self.no_slip = cfg.tank.boundary == "no_slip"
+        self.beta_max = w.beta_max
+        self.mass = self.rho_w * self.vol0  # reference water particle mass (run file attribute)
+        # largest kinematic viscosity a particle feels (Morris pair coefficient (mu_i + mu_j) / (2 rho_i))
+        nus = [self.nu_w] if self.n_water else []
+        if self.has_air:
+            nus += [self.nu_a, (self.rho_a * self.nu_a + self.rho_w * self.nu_w) / (2.0 * self.rho_a)]
+        self.nu_max = max(nus) if nus else 0.0
+
+        self.h_lo = H_MIN * self.h0 if self.variable_h else self.h0
+        self.h_hi = H_MAX * self.h0 if self.variable_h else self.h0
+        self.skin = w.neighbour_skin * self.re
+        self.cell = 2.0 * self.h_hi + self.skin
+        self.max_nb = cfg.max_neighbours()
+
+        # packed neighbour views. s: x (dim), v (dim), rho, m, kind[, h] at the start of a step (read by the
+        # density pass); q: rho, p / rho^2[, h] after the density pass (read by the force pass). Each
+        # pass writes only fields that no particle reads in that pass, so every step is three loops.
+        self.S_V = dim
+        self.S_RHO = 2 * dim
+        self.S_M = 2 * dim + 1
+        self.S_KIND = 2 * dim + 2
+        self.S_H = 2 * dim + 3
+        self.ns = 2 * dim + 3 + (1 if self.variable_h else 0)
+        self.Q_RHO, self.Q_PR, self.Q_H = 0, 1, 2
+        self.nq = 3 if self.variable_h else 2
+        # small scenes run their loops serially: a parallel loop costs ~50 us of thread dispatch
+        self.serial = self.n_fluid < SERIAL_BELOW
+
+        vec = ti.Vector.field
+        self.s = vec(self.ns, float, n)
+        self.q = vec(self.nq, float, n)
+        # reductions of the kick and force passes (reading a 0-d vector field costs ~7 us, a kernel's
+        # vector return value ~50 us)
+        self.red_kick = vec(2, float, ())
+        self.red_forces = vec(_NRED, float, ())
+        self.x = vec(dim, float, n)
+        self.v = vec(dim, float, n)  # leap-frog velocity v^{n+1/2}
+        self.a = vec(dim, float, n)
+        self.xs = vec(dim, float, n)  # XSPH correction eq 53
+        self.normal = vec(dim, float, n)
+        self.x0 = vec(dim, float, n)  # positions at the last neighbour-list build
+        self.rho = ti.field(float, n)
+        self.p = ti.field(float, n)
+        self.h = ti.field(float, n)
+        self.m = ti.field(float, n)
+        self.wdepth = ti.field(float, n)
+        self.wnum = ti.field(float, n)
+        self.wden = ti.field(float, n)
+        self.kind = ti.field(ti.i32, n)
+        self.ids = ti.field(ti.i32, n)
+        self.active = ti.field(ti.i32, n)
+        self.fmask = ti.field(ti.i32, n)
+        self.particle_fields = [self.x, self.v, self.a, self.xs, self.normal, self.rho, self.p, self.h, self.m,
+                                self.wdepth, self.kind, self.ids, self.active]
+
+        init = initial_state(cfg, scene, self.materials)
+        self.np_fp = np.float64 if is_f64() else np.float32
+        f = self.np_fp
+        self.x.from_numpy(scene.position.astype(f))
+        self.normal.from_numpy(scene.normal.astype(f))
+        self.kind.from_numpy(scene.kind.astype(np.int32))
+        self.ids.from_numpy(scene.ids)
+        self.active.fill(1)
+        self.v.from_numpy(init["velocity"].astype(f))
+        self.rho.from_numpy(init["density"].astype(f))
+        self.p.from_numpy(init["pressure"].astype(f))
+        self.m.from_numpy(init["mass"].astype(f))
+        self.wdepth.from_numpy(init["wall_depth"].astype(f))
+        self.h.fill(self.h0)
+        self.a.fill(0.0)
+        self.xs.fill(0.0)
+        self.initial_density = init["density"]
+
+        self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.cell, self.max_nb)
+        self.r_list = 0.0  # list radius at the last build
+        self.hmax = self.h0
+        self.rebuilds = 0
+        self.dt_prev = 0.0
+        self.removed_total = 0
+        self.step_count = 0
+        self.time = 0.0
+        self.timers = {k: 0.0 for k in ("update", "neighbours", "density", "forces")}
+        self.red = np.zeros(_NRED)
+        self.last = {}
+
+    # ------------------------------------------------------------------ materials
+    @ti.func
+    def _is_air(self, k):
+        out = False
+        if ti.static(self.has_air):
+            out = k == AIR
+        return out
+
+    @ti.func
+    def _eos_pressure(self, k, rho):
+        p = eos.pressure(rho, self.rho_w, self.b_w, self.gamma_w)
+        if self._is_air(k):
+            p = eos.pressure(rho, self.rho_a, self.b_a, self.gamma_a)
+        return p
+
+    @ti.func
+    def _sound_speed(self, k, rho):
+        c = eos.sound_speed(rho, self.rho_w, self.b_w, self.gamma_w)
+        if self._is_air(k):
+            c = eos.sound_speed(rho, self.rho_a, self.b_a, self.gamma_a)
+        return c
+
+    @ti.func
+    def _nu(self, k):
+        nu = self.nu_w
+        if self._is_air(k):
+            nu = self.nu_a
+        return nu
+
+    @ti.func
+    def _c0(self, k):
+        c = self.c_w
+        if self._is_air(k):
+            c = self.c_a
+        return c
+
+    @ti.func
+    def _cohesion(self, k):
+        coh = self.coh_w
+        if self._is_air(k):
+            coh = self.coh_a
+        return coh
+
+    # ------------------------------------------------------------------ packed view
+    @ti.func
+    def _pos(self, sj):
+        return ti.Vector([sj[d] for d in ti.static(range(self.dim))])
+
+    @ti.func
+    def _vel(self, sj):
+        return ti.Vector([sj[self.S_V + d] for d in ti.static(range(self.dim))])
+
+    @ti.func
+    def _h_pair(self, hi, sj):
+        """h_ij = (h_i + h_j) / 2 (eq 7), or the constant h0."""
+        hij = self.h0
+        if ti.static(self.variable_h):
+            hij = 0.5 * (hi + sj[self.S_H])
+        return hij
+
+    @ti.func
+    def _pack(self, i):
+        for d in ti.static(range(self.dim)):
+            self.s[i][d] = self.x[i][d]
+            self.s[i][self.S_V + d] = self.v[i][d]
+        self.s[i][self.S_RHO] = self.rho[i]
+        self.s[i][self.S_M] = self.m[i]
+        self.s[i][self.S_KIND] = ti.cast(self.kind[i], float)
+        self.q[i][self.Q_RHO] = self.rho[i]
+        self.q[i][self.Q_PR] = self.p[i] / (self.rho[i] * self.rho[i])
+        if ti.static(self.variable_h):
+            self.s[i][self.S_H] = self.h[i]
+            self.q[i][self.Q_H] = self.h[i]
+
+    # ------------------------------------------------------------------ kernels
+    @ti.kernel
+    def _k_mask(self):
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n):
+            self.fmask[i] = 1 if (self.active[i] == 1 and self.kind[i] != WALL) else 0
+
+    @ti.kernel
+    def _k_after_build(self):
+        """After a list build: positions at build time and the packed views."""
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n):
+            self.x0[i] = self.x[i]
+            self._pack(i)
+
+    @ti.kernel
+    def _k_kick_drift(self, dt: float, dt_prev: float):
+        """Leap-frog (eq 48): kick with a^n, drift with v^{n+1/2} plus the XSPH correction (eq 53); the
+        density and h of the last density pass become the start values of this one. Returns the largest
+        squared displacement since the last list build and the largest h."""
+        d2max = 0.0
+        hmax = 0.0
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n):
+            if self.fmask[i] == 1:
+                vh = self.v[i] + 0.5 * (dt_prev + dt) * self.a[i]
+                self.v[i] = vh
+                xn = self.x[i] + dt * vh
+                if ti.static(self.xsph_on):
+                    xn += dt * self.xs[i]
+                self.x[i] = xn
+                for d in ti.static(range(self.dim)):
+                    self.s[i][d] = xn[d]
+                    self.s[i][self.S_V + d] = vh[d]
+                self.s[i][self.S_RHO] = self.q[i][self.Q_RHO]
+                dd = xn - self.x0[i]
+                ti.atomic_max(d2max, dd.dot(dd))
+                if ti.static(self.variable_h):
+                    hi = self.q[i][self.Q_H]
+                    self.s[i][self.S_H] = hi
+                    ti.atomic_max(hmax, hi)
+        self.red_kick[None] = ti.Vector([d2max, hmax])
+
+    @ti.kernel
+    def _k_density(self, dt: float, normalise: ti.template()):
+        """Density pass at x^{n+1} with v^{n+1/2}: divergence D_i = sum_j V_j (v_j - v_i) . grad_i W_ij
+        (eq 25 in volume form; walls with the virtual velocity of eq 50-51), rho^{n+1} = rho^n (1 - D_i dt)
+        (eq 48), h^{n+1} = h^n (1 + D_i dt / d) (eq 52), the XSPH correction (eq 53) and, when `normalise`,
+        eq 27 applied to rho^n first: rho_i = sum_{j in a} m_j W_ij / sum_{j in a} (m_j / rho_j) W_ij over
+        the material a of i (self included). Then the equations of state (eq 39-41). Reads the view s,
+        writes the view q and the particle's own fields."""
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n):
+            if self.fmask[i] == 1:
+                si = self.s[i]
+                xi = self._pos(si)
+                vi = self._vel(si)
+                ki = si[self.S_KIND]
+                rhoi = si[self.S_RHO]
+                hi = self.h0
+                if ti.static(self.variable_h):
+                    hi = si[self.S_H]
+                num = 0.0
+                den = 0.0
+                if ti.static(normalise):
+                    w0 = kernels.w(0.0, hi, self.dim)
+                    num = si[self.S_M] * w0
+                    den = si[self.S_M] / rhoi * w0
+                div = 0.0
+                xs = ti.Vector.zero(float, self.dim)
+                for k in range(self.grid.nbr_count[i]):
+                    j = self.grid.nbr[i, k]
+                    sj = self.s[j]
+                    hij = self._h_pair(hi, sj)
+                    rij = xi - self._pos(sj)
+                    r2 = rij.dot(rij)
+                    if r2 >= 4.0 * hij * hij or r2 == 0.0:
+                        continue
+                    r = ti.sqrt(r2)
+                    wij, dwdr = kernels.w_and_dw_dr(r, hij, self.dim)
+                    gw = dwdr / r * rij
+                    kj = sj[self.S_KIND]
+                    if kj == WALL:
+                        db = self.wdepth[j]
+                        nrm = self.normal[j]
+                        beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
+                        vij = terms.boundary_relative_velocity(vi, nrm, beta, self.no_slip)
+                        div -= self.vol0 * vij.dot(gw)
+                    else:
+                        vij = vi - self._vel(sj)
+                        mj = sj[self.S_M]
+                        rhoj = sj[self.S_RHO]
+                        div -= mj / rhoj * vij.dot(gw)
+                        same = True
+                        if ti.static(self.has_air):
+                            same = kj == ki
+                        if ti.static(self.xsph_on or normalise):
+                            if ti.static(self.xsph_on):
+                                xs += terms.xsph(mj, rhoi, rhoj, vij, wij)
+                            if ti.static(normalise):  # noqa: SIM102 (compile-time if)
+                                if same:
+                                    num += mj * wij
+                                    den += mj / rhoj * wij
+                if ti.static(normalise):
+                    rhoi = num / den
+                dd = div * dt
+                rho = rhoi * (1.0 - dd)
+                p = self._eos_pressure(self.kind[i], rho)
+                self.rho[i] = rho
+                self.p[i] = p
+                self.q[i][self.Q_RHO] = rho
+                self.q[i][self.Q_PR] = p / (rho * rho)
+                if ti.static(self.xsph_on):
+                    self.xs[i] = self.xsph_eps * xs
+                if ti.static(self.variable_h):
+                    hn = ti.min(ti.max(hi * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
+                    self.h[i] = hn
+                    self.q[i][self.Q_H] = hn
+
+    @ti.kernel
+    def _k_wall_pressure(self):
+        """Wall pressure for output: extrapolated from the fluid with hydrostatic correction, P_w =
+        sum_f W_wf (P_f + rho_f g . (x_w - x_f)) / sum_f W_wf (Adami et al. 2012). The step itself
+        needs no wall pressure field: each fluid particle sees a wall particle with its own extrapolated
+        value (see `_k_forces`)."""
+        for i in range(self.n):
+            if self.kind[i] == WALL:
+                self.wnum[i] = 0.0
+                self.wden[i] = 0.0
+        for i in range(self.n):
+            if self.fmask[i] == 1:
+                xi = self.x[i]
+                hi = self.h0
+                if ti.static(self.variable_h):
+                    hi = self.h[i]
+                for k in range(self.grid.nbr_count[i]):
+                    j = self.grid.nbr[i, k]
+                    if self.kind[j] == WALL:
+                        hij = self._h_pair(hi, self.s[j])
+                        r = (xi - self.x[j]).norm()
+                        if r < 2.0 * hij:
+                            wij = kernels.w(r, hij, self.dim)
+                            pw = operators.wall_pressure(self.p[i], self.rho[i], self.g, self.x[j], xi)
+                            ti.atomic_add(self.wnum[j], wij * pw)
+                            ti.atomic_add(self.wden[j], wij)
+        for i in range(self.n):
+            if self.kind[i] == WALL:
+                pw = 0.0
+                if self.wden[i] > 0.0:
+                    pw = self.wnum[i] / self.wden[i]
+                self.p[i] = pw
+
+    @ti.kernel
+    def _k_forces(self, dt: float):
+        """Accelerations at x^{n+1}, rho^{n+1}: eq 34 (pressure; Morris viscosity with v^{n+1/2}), eq 36,
+        eq 54 and gravity; reductions: kinetic energy, max speed, water volume, min h/|a|, min h/c,
+        non-finite count, first bad id, min h, air volume."""
+        ke = 0.0
+        vmax = 0.0
+        vol = 0.0
+        vol_air = 0.0
+        h_over_a = 1.0e30
+        h_over_c = 1.0e30
+        hmin = 1.0e30
+        bad = 0.0
+        first_bad = 2.0e9
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n):
+            if self.fmask[i] == 1:
+                si = self.s[i]
+                qi = self.q[i]
+                xi = self._pos(si)
+                vi = self._vel(si)
+                rhoi = qi[self.Q_RHO]
+                pri = qi[self.Q_PR]
+                pi = pri * rhoi * rhoi
+                mi = si[self.S_M]
+                ki = self.kind[i]
+                voli = mi / rhoi
+                hi = self.h0
+                if ti.static(self.variable_h):
+                    hi = qi[self.Q_H]
+                nui = self._nu(ki)
+                c0i = self._c0(ki)
+                cohi = self._cohesion(ki)
+                acc = self.g
+                for k in range(self.grid.nbr_count[i]):
+                    j = self.grid.nbr[i, k]
+                    sj = self.s[j]
+                    qj = self.q[j]
+                    hij = self.h0
+                    if ti.static(self.variable_h):
+                        hij = 0.5 * (hi + qj[self.Q_H])
+                    rij = xi - self._pos(sj)
+                    r2 = rij.dot(rij)
+                    if r2 >= 4.0 * hij * hij or r2 == 0.0:
+                        continue
+                    r = ti.sqrt(r2)
+                    dwdr = kernels.dw_dr(r, hij, self.dim)
+                    gw = dwdr / r * rij
+                    f_ij = operators.laplacian_weight(r, hij, self.eta2, self.dim)
+                    kj = sj[self.S_KIND]
+                    prj = qj[self.Q_PR]
+                    if kj == WALL:
+                        # boundary particle: the virtual velocity of eq 50-51, the density of i and the
+                        # pressure of i extrapolated hydrostatically to it (Neumann condition)
+                        db = self.wdepth[j]
+                        nrm = self.normal[j]
+                        beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
+                        vij = terms.boundary_relative_velocity(vi, nrm, beta, self.no_slip)
+                        mj = rhoi * self.vol0
+                        pw = operators.wall_pressure(pi, rhoi, self.g, self._pos(sj), xi)
+                        acc += terms.pressure_same_material(mj, pri, pw / (rhoi * rhoi), gw)
+                        acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoi, nui, f_ij) * vij
+                        if ti.static(self.av_on):
+                            pij = terms.artificial_viscosity(vij, rij, r2, hij, c0i, rhoi, self.av_alpha,
+                                                             self.av_beta, self.av_eps)
+                            acc -= mj * pij * gw
+                    else:
+                        vij = vi - self._vel(sj)
+                        rhoj = qj[self.Q_RHO]
+                        mj = sj[self.S_M]
+                        same = True
+                        if ti.static(self.has_air):
+                            same = kj == ki
+                        if same:
+                            acc += terms.pressure_same_material(mj, pri, prj, gw)
+                        else:
+                            acc += terms.pressure_interface(mi, voli, mj / rhoj, pi, prj * rhoj * rhoj, gw)
+                        if same:
+                            acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nui, f_ij) * vij
+                            if ti.static(self.av_on):
+                                pij = terms.artificial_viscosity(vij, rij, r2, hij, c0i, 0.5 * (rhoi + rhoj),
+                                                                 self.av_alpha, self.av_beta, self.av_eps)
+                                acc -= mj * pij * gw
+                            if ti.static(self.cohesion_on):
+                                acc += terms.cohesion(cohi, mj, gw)
+                        else:
+                            nuj = self._nu(ti.cast(kj, ti.i32))
+                            acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nuj, f_ij) * vij
+                self.a[i] = acc
+                # reductions
+                vs = vi + 0.5 * dt * acc  # synchronised velocity at this time
+                s2 = vs.dot(vs)
+                ke += 0.5 * mi * s2
+                ti.atomic_max(vmax, ti.sqrt(s2))
+                if self._is_air(ki):
+                    vol_air += voli
+                else:
+                    vol += voli
+                an = acc.norm()
+                if an > 0.0:
+                    ti.atomic_min(h_over_a, hi / an)
+                ti.atomic_min(h_over_c, hi / self._sound_speed(ki, rhoi))
+                ti.atomic_min(hmin, hi)
+                val = s2 + pi + xi.sum() + rhoi
+                if ti.math.isnan(val) or ti.math.isinf(val):
+                    bad += 1.0
+                    ti.atomic_min(first_bad, float(self.ids[i]))
+        self.red_forces[None] = ti.Vector([ke, vmax, vol, h_over_a, h_over_c, bad, first_bad, hmin, vol_air])
+
+    # ------------------------------------------------------------------ step
+    def _tick(self, key, t0):
+        t1 = _time.perf_counter()
+        self.timers[key] += t1 - t0
+        return t1
+
+    def neighbour_search(self):
+        """Sort into cells, reorder every particle array, rebuild the lists with the Verlet skin."""
+        removed = self.grid.sort(self.x, self.active, self.n)
+        if len(removed):
+            ids = self.ids.to_numpy()[removed]
+            self.removed_total += len(removed)
+            if self.cfg.guard.out_of_domain == "error":
+                raise InstabilityError(
+                    f"step {self.step_count}, t = {self.time:.6g} s: {len(removed)} particle(s) left the domain "
+                    f"(ids {ids_text(ids)})", step=self.step_count, time=self.time, quantity="position",
+                    particles=ids)
+            log.warning("step %d, t = %.6g s: removed %d particle(s) that left the domain (ids %s); %d removed so far",
+                        self.step_count, self.time, len(removed), ids_text(ids), self.removed_total)
+        for f in self.particle_fields:
+            self.grid.reorder(f, self.n)
+        self._k_mask()
+        self.r_list = min(self.cell, 2.0 * self.hmax + self.skin)
+        try:
+            self.grid.build_neighbour_lists(self.x, self.fmask, self.n, self.r_list, self.ids)
+        except NeighbourOverflowError as exc:
+            raise InstabilityError(f"step {self.step_count}, t = {self.time:.6g} s: {exc}", step=self.step_count,
+                                   time=self.time, quantity="neighbour count",
+                                   particles=[exc.particle_id]) from None
+        self._k_after_build()
+        self.rebuilds += 1
+
+    def _forces(self, dt: float):
+        t0 = _time.perf_counter()
+        self._k_forces(dt)
+        self.red = self.red_forces[None].to_numpy()
+        self._tick("forces", t0)
+        r = self.red
+        self.last = {"kinetic_energy": float(r[0]), "max_speed": float(r[1]), "water_volume": float(r[2]),
+                     "air_volume": float(r[8])}
+        if r[5] > 0:
+            raise InstabilityError(
+                f"step {self.step_count}, t = {self.time:.6g} s: non-finite position, velocity, density or "
+                f"pressure at {int(r[5])} particle(s) (first id {int(r[6])})", step=self.step_count,
+                time=self.time, quantity="non-finite state", particles=[int(r[6])])
+
+    def step(self, dt: float) -> dict:
+        t0 = _time.perf_counter()
+        self._k_kick_drift(dt, self.dt_prev)
+        d2max, hmax = self.red_kick[None].to_numpy()
+        if self.variable_h:
+            self.hmax = float(hmax)
+        self.step_count += 1
+        self.time += dt
+        t0 = self._tick("update", t0)
+        if 2.0 * math.sqrt(max(float(d2max), 0.0)) + 2.0 * self.hmax > self.r_list:
+            self.neighbour_search()
+        t0 = self._tick("neighbours", t0)
+        self._k_density(dt, self.normalised and self.step_count % self.normalise_every == 0)
+        self._tick("density", t0)
+        self._forces(dt)
+        self.dt_prev = dt
+        return self.last
+
+    def initial_diagnostics(self) -> dict:
+        """Neighbour lists, wall pressure and forces at t = 0 (the first step needs a^0)."""
+        self.neighbour_search()
+        self._forces(0.0)
+        return self.last
+
+    def propose_dt(self) -> tuple[float, int]:
+        """Time step of eq 49 from the forces just computed: min(cfl min h/c, force min sqrt(h/|a|),
+        viscous h_min^2 / nu_max), with its limit code. The seed prints the third limit as
+        0.125 min sqrt(h / v), dimensionally inconsistent; this is Morris et al.'s viscous condition
+        0.125 h^2 / nu that the seed cites for its viscous term."""
+        ts = self.cfg.timestep
+        r = self.red
+        limits = {DT_CFL: ts.cfl * float(r[4]), DT_FORCE: ts.force * math.sqrt(float(r[3]))}
+        if self.nu_max > 0.0:
+            limits[DT_VISCOUS] = ts.viscous * float(r[7]) ** 2 / self.nu_max
+        which = min(limits, key=limits.get)
+        if limits[which] < ts.min:
+            raise InstabilityError(
+                f"step {self.step_count}, t = {self.time:.6g} s: the time step of eq 49 fell to {limits[which]:.3g} s, "
+                f"below timestep.min = {ts.min:g} s", step=self.step_count, time=self.time, quantity="time step")
+        return limits[which], which
+
+    # ------------------------------------------------------------------ output
+    def fields_by_id(self) -> dict:
+        """Per-particle arrays in id order (SPEC 8 frame fields); pressures relative to the ambient."""
+        n = self.n
+        self._k_wall_pressure()
+        ids = self.ids.to_numpy()[:n]
+        order = np.empty(n, dtype=np.int64)
+        order[ids] = np.arange(n)
+        kind = self.kind.to_numpy()[order]
+        vel = self.v.to_numpy()[order] + 0.5 * self.dt_prev * self.a.to_numpy()[order]
+        vel[kind == WALL] = 0.0
+        rho = self.rho.to_numpy()[order]
+        rho = np.where(kind == WALL, self.rho_w, rho)
+        return {
+            "position": self.x.to_numpy()[order],
+            "velocity": vel,
+            "pressure": self.p.to_numpy()[order],
+            "density": rho,
+            "active": self.active.to_numpy()[order].astype(bool),
+        }
+
+    def max_speed_bound(self) -> float:
+        if self.cfg.guard.max_speed is not None:
+            return self.cfg.guard.max_speed
+        height = float(self.cfg.tank.size[-1])
+        return 20.0 * math.sqrt(self.g_abs * height) if self.g_abs > 0 else 100.0
+
+
+def _exponent(gamma: float):
+    """An integral exponent as int, so that the EOS compiles (rho / rho0)^7 to multiplications."""
+    return int(gamma) if float(gamma).is_integer() else float(gamma)

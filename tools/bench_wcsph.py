@@ -1,0 +1,160 @@
+"""Throughput benchmark of mode wcsph_biot: particle-steps per second on the 2D dam break.
+
+Runs configs/dambreak_wcsph.yaml (tank 4 m x 3 m, column 1 m x 2 m) at the requested spacings in one
+process, lets the collapse start (warm-up, JIT compilation excluded and reported separately), then
+times a fixed number of steps with the time step of eq 49 and reports particle-steps per second
+(fluid particles x steps / wall seconds), the split between phases and how often neighbour lists
+were rebuilt. The steps are timed in ten chunks; besides the mean, the rate of the fastest chunk is reported (other
+processes on a shared machine slow some chunks down). Writes docs/performance_wcsph.json and the table
+in docs/performance_wcsph.md.
+
+    python tools/bench_wcsph.py [--dx 0.01 0.005] [--steps 300] [--warmup 200] [--precision f32 f64]
+
+Each precision runs in its own process (one Taichi runtime per process); the table holds them all.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tools"))
+
+from bench import machine
+
+
+def bench_case(dx: float, steps: int, warmup: int, overrides=()) -> dict:
+    from taichi_sph.config import load_config
+    from taichi_sph.run import TimeStepper
+    from taichi_sph.scene import build_scene
+    from taichi_sph.wcsph.solver import WCSPHSolver
+
+    cfg = load_config(ROOT / "configs" / "dambreak_wcsph.yaml", [f"dx={dx}", *overrides])
+    scene = build_scene(cfg)
+    t0 = time.perf_counter()
+    solver = WCSPHSolver(cfg, scene)
+    solver.initial_diagnostics()
+    stepper = TimeStepper(cfg, solver.g_abs)
+    for _ in range(warmup):
+        solver.step(stepper.choose(0.0, solver.propose_dt())[0])
+    setup = time.perf_counter() - t0
+    for k in solver.timers:
+        solver.timers[k] = 0.0
+    rebuilds0 = solver.rebuilds
+    chunk = max(1, steps // 10)
+    chunks = []
+    cpu0 = time.process_time()
+    for _ in range(0, steps, chunk):
+        t0 = time.perf_counter()
+        for _ in range(chunk):
+            solver.step(stepper.choose(0.0, solver.propose_dt())[0])
+        chunks.append(time.perf_counter() - t0)
+    cpu = time.process_time() - cpu0
+    steps = chunk * len(chunks)
+    wall = sum(chunks)
+    best = min(chunks) / chunk
+    return {
+        "case": "dam break 2D", "dx": dx, "fluid_particles": solver.n_fluid, "all_particles": solver.n,
+        "steps": steps, "simulated_time_at_end": solver.time, "seconds_per_step": wall / steps,
+        "particle_steps_per_second": solver.n_fluid * steps / wall, "mipps": solver.n_fluid * steps / wall / 1e6,
+        "mipps_best_chunk": solver.n_fluid / best / 1e6,
+        "cpu_over_wall": cpu / wall,
+        "steps_per_rebuild": steps / max(solver.rebuilds - rebuilds0, 1),
+        "phase_seconds_per_step": {k: v / steps for k, v in solver.timers.items()},
+        "setup_and_warmup_seconds": setup,
+    }
+
+
+def markdown(results, info) -> str:
+    phases = list(results[0]["phase_seconds_per_step"])
+    lines = [
+        "# Performance of mode wcsph_biot",
+        "",
+        (f"Machine: {info['machine']}; Taichi {info['taichi']}, arch {info['arch']}, {info['threads']} threads. "
+         f"Produced by `python tools/bench_wcsph.py` on {info['date']}."),
+        "",
+        "2D dam break (configs/dambreak_wcsph.yaml: tank 4 m x 3 m, column 1 m x 2 m, slip walls), timed after",
+        f"{info['warmup']} steps of the collapse, adaptive step of eq 49. Particle-steps per second count fluid",
+        "particles. Times per step in milliseconds; JIT compilation excluded. The steps are timed in ten chunks;",
+        "the fastest chunk is the rate with the least interference from other processes, and CPU seconds per",
+        "wall second (2 = both cores busy with this run) shows how much of the machine the run had (the",
+        "machine is shared; the 20k runs, with ~2 ms loops, suffer most).",
+        "",
+        "| precision | dx | fluid particles | all particles | M particle-steps/s (mean) | (fastest chunk) | "
+        "CPU s / wall s | ms/step | steps per list rebuild | "
+        + " | ".join(phases) + " | setup+warm-up s |",
+        "|---|---|---|---|---|---|---|---|---|" + "---|" * len(phases) + "---|",
+    ]
+    for r in results:
+        ph = " | ".join(f"{1e3 * r['phase_seconds_per_step'][p]:.2f}" for p in phases)
+        lines.append(f"| {r['precision']} | {r['dx']:g} | {r['fluid_particles']} | {r['all_particles']} | {r['mipps']:.2f} | "
+                     f"{r['mipps_best_chunk']:.2f} | {r['cpu_over_wall']:.2f} | "
+                     f"{1e3 * r['seconds_per_step']:.2f} | {r['steps_per_rebuild']:.1f} | {ph} | "
+                     f"{r['setup_and_warmup_seconds']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+def run_one(args) -> list:
+    """All spacings at one precision, in this process."""
+    from taichi_sph import backend
+
+    be = backend.init(args.arch, args.precision[0])
+    results = []
+    for dx in args.dx:
+        r = bench_case(dx, args.steps, args.warmup, args.overrides)
+        r["precision"] = be["precision"]
+        print(f"{be['precision']}, dx {dx:g}: {r['fluid_particles']} fluid particles, {r['mipps']:.2f} M particle-steps/s "
+              f"(fastest chunk {r['mipps_best_chunk']:.2f}, cpu/wall {r['cpu_over_wall']:.2f}), "
+              f"{1e3 * r['seconds_per_step']:.2f} ms/step, {r['steps_per_rebuild']:.1f} steps per rebuild, "
+              f"phases {', '.join(f'{k} {1e3 * v:.2f}' for k, v in r['phase_seconds_per_step'].items())} ms",
+              flush=True)
+        results.append(r)
+    return results
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--dx", type=float, nargs="+", default=[0.01, 0.005])
+    ap.add_argument("--steps", type=int, default=300)
+    ap.add_argument("--warmup", type=int, default=200)
+    ap.add_argument("--arch", default="cpu")
+    ap.add_argument("--precision", nargs="+", default=["f32", "f64"], choices=["auto", "f32", "f64"])
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--out", default=str(ROOT / "docs" / "performance_wcsph.md"))
+    ap.add_argument("--results-json", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.results_json:  # a child process: one precision
+        Path(args.results_json).write_text(json.dumps(run_one(args)))
+        return
+    results = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for prec in args.precision:
+            path = Path(tmp) / f"{prec}.json"
+            cmd = [sys.executable, __file__, "--precision", prec, "--results-json", str(path), "--arch", args.arch,
+                   "--steps", str(args.steps), "--warmup", str(args.warmup), "--dx", *map(str, args.dx)]
+            for o in args.overrides:
+                cmd += ["--set", o]
+            subprocess.run(cmd, check=True)
+            results += json.loads(path.read_text())
+    import taichi as ti
+
+    info = {"machine": machine(), "taichi": ".".join(map(str, ti.__version__)), "arch": args.arch,
+            "threads": os.environ.get("TI_CPU_MAX_NUM_THREADS", os.cpu_count()),
+            "date": time.strftime("%Y-%m-%d"), "warmup": args.warmup, "overrides": args.overrides}
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.with_suffix(".json").write_text(json.dumps({"info": info, "results": results}, indent=2))
+    out.write_text(markdown(results, info))
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
