@@ -6,10 +6,25 @@ Every failure raises InputError with one line that names the file or the key.
 from __future__ import annotations
 
 import copy
+import re
 from pathlib import Path
 
 import yaml
 from pydantic import ValidationError
+
+
+class _Loader(yaml.SafeLoader):
+    """YAML 1.1 safe loader that also reads 1e-6 and 1E+3 as numbers (YAML 1.1 wants a dot: 1.0e-6)."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+    |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+    |\.[0-9_]+(?:[eE][-+][0-9]+)?
+    |[-+]?\.(?:inf|Inf|INF)
+    |\.(?:nan|NaN|NAN))$""", re.X),
+    list("-+0123456789."))
 
 from ..errors import InputError
 from .schema import Config, check
@@ -26,7 +41,7 @@ def parse_overrides(items) -> list[tuple[str, object]]:
         if not key:
             raise InputError(f"--set '{item}': empty key")
         try:
-            value = yaml.safe_load(raw) if raw.strip() != "" else ""
+            value = yaml.load(raw, Loader=_Loader) if raw.strip() != "" else ""
         except yaml.YAMLError:
             raise InputError(f"--set '{item}': value is not valid YAML") from None
         out.append((key, value))
@@ -71,7 +86,7 @@ def read_yaml(path) -> dict:
     if not p.is_file():
         raise InputError(f"config file '{path}' does not exist")
     try:
-        data = yaml.safe_load(p.read_text())
+        data = yaml.load(p.read_text(), Loader=_Loader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" line {mark.line + 1}" if mark is not None else ""
