@@ -173,3 +173,32 @@ def test_still_water_over_fine_sand(run_cli, tmp_path):
         d = rf.diagnostics()
         assert np.max(d["max_speed"]) < 0.01 * np.sqrt(G * H)
         assert abs(d["water_volume"][-1] / d["water_volume"][0] - 1) < 0.005
+
+
+def test_permeameter_follows_the_falling_head_ode(run_cli, tmp_path):
+    """configs/permeameter.yaml at dx 5 mm (20 particle spacings over the 10 cm plug): the water level
+    above the plug follows the quasi-steady ODE (SPEC 5) over the first half of the drainage (h from
+    0.2 to 0.1 m, 0.42 s). Measured: within 3.2 % (largest at the end of that span; +2.5 % at 20 ms is
+    the start from rest, which the ODE does not have). Bound 5 % (the acceptance value). At dx 1 cm
+    the level is 9 % low at 0.42 s: the porosity ramps from 1 to eps0 over the kernel support inside
+    each face of the plug (eq 32), which shortens the plug's effective length by O(dx)."""
+    from taichi_sph.isph.porosity import falling_head_level
+
+    out = tmp_path / "pm.h5"
+    r = run_cli("--config", "configs/permeameter.yaml", "--set", "dx=0.005", "--set", "dt=0.0005",
+                "--set", "end_time=0.44", "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    plug_top, width = 0.40, 0.10
+    with RunFile(out) as rf:
+        w = rf.kind == 0
+        h = []
+        for i in range(rf.n_frames):
+            f = rf.frame(i)
+            z = f["position"][w & f["active"]][:, -1]
+            h.append((z > plug_top).sum() * rf.dx**2 / width)  # water above the plug as a height
+        h, t = np.array(h), rf.times
+    ode = falling_head_level(h[0], 0.10, 0.4, 0.01, t_end=t[-1])
+    ref = np.array([ode(ti) for ti in t])
+    first_half = ref >= 0.5 * h[0]
+    assert first_half.sum() > 10
+    assert np.max(np.abs(h[first_half] / ref[first_half] - 1)) < 0.05

@@ -9,22 +9,9 @@ import sys
 
 import numpy as np
 import yaml
-from scipy.integrate import solve_ivp
 
 from taichi_sph.io.hdf5 import RunFile
-from taichi_sph.isph.porosity import linear_drag_np, quadratic_drag_np
-
-
-def ode_level(h0, length, eps, d50, nu=1.0e-6, g=9.81, alpha_c=1000.0, beta_c=1.1, t_end=1.0):
-    a = linear_drag_np(eps, nu, d50, alpha_c)
-    b = quadratic_drag_np(eps, d50, beta_c)
-
-    def rhs(_t, y):
-        h = max(y[0], 0.0)
-        f = g / eps * (h + length) / length
-        return [-(-a + np.sqrt(a * a + 4.0 * b * f)) / (2.0 * b)]
-
-    return solve_ivp(rhs, (0.0, t_end), [h0], dense_output=True, rtol=1e-9, atol=1e-12).sol
+from taichi_sph.isph.porosity import falling_head_level
 
 
 def simulated_level(rf, plug_top, width):
@@ -45,9 +32,9 @@ def main(path):
         lo, hi = reg["min"][-1], reg["max"][-1]
         width = cfg["tank"]["size"][0]
         h = simulated_level(rf, hi, width)
-        sol = ode_level(h[0], hi - lo, reg["eps0"], reg["d50"], t_end=rf.times[-1])
+        sol = falling_head_level(h[0], hi - lo, reg["eps0"], reg["d50"], t_end=rf.times[-1])
         for t, hs in zip(rf.times, h):
-            ho = float(sol(t)[0])
+            ho = float(sol(t))
             print(f"{t:6.3f}  {hs:.4f}  {ho:.4f}  {hs / ho - 1:+.3f}")
 
 

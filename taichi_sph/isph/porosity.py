@@ -53,6 +53,19 @@ def terminal_darcy_velocity(eps, nu, d50, alpha_c=1000.0, beta_c=1.1, g=9.81, gr
     return (-a + np.sqrt(a * a + 4.0 * b * rhs)) / (2.0 * b)
 
 
+def falling_head_level(h0, length, eps, d50, t_end, nu=1.0e-6, g=9.81, alpha_c=1000.0, beta_c=1.1):
+    """Falling-head permeameter reference (SPEC 5): water of height h above a plug of length L drains
+    through it, quasi-steady, a vD + b vD^2 = (g / eps) (h + L) / L and dh/dt = -vD (inertia Cr
+    neglected). Returns h(t) as a callable (dense ODE solution on [0, t_end])."""
+    from scipy.integrate import solve_ivp
+
+    def rhs(_t, y):
+        return [-terminal_darcy_velocity(eps, nu, d50, alpha_c, beta_c, g, (max(y[0], 0.0) + length) / length)]
+
+    sol = solve_ivp(rhs, (0.0, t_end), [h0], dense_output=True, rtol=1e-9, atol=1e-12).sol
+    return lambda t: sol(t)[0]
+
+
 def lattice_table(dim: int, n: int = 96, eps_min: float = 0.05) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For water in ground of porosity eps (pore lattice of spacing dx eps^(-1/dim)), tabulated on n
     porosities in [eps_min, 1]: the lattice kernel sum K(eps) and the lattice neighbour count
