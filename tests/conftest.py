@@ -38,3 +38,25 @@ def run_cli():
         return subprocess.run(cmd, cwd=cwd or ROOT, env=cli_env(), capture_output=True, text=True, timeout=timeout)
 
     return _run
+
+
+def surge_front_series(path, a):
+    """Dam break in a run file: T = t sqrt(2 g / a) and Z = z / a, z the surge front (the edge of the water
+    body on the line of the first particle layer, `taichi_sph.probes.surge_front`)."""
+    import numpy as np
+
+    from taichi_sph.io.hdf5 import RunFile
+    from taichi_sph.probes import surge_front
+
+    with RunFile(path) as rf:
+        dim, dx = rf.dim, rf.dx
+        line = np.zeros(dim)
+        line[-1] = 0.5 * dx
+        if dim == 3:
+            line[1] = float(rf.field("position", 0)[rf.kind == 0][:, 1].mean())  # mid-depth of a slice
+        Z = []
+        for i in range(rf.n_frames):
+            arrays = {"position": rf.field("position", i), "kind": rf.kind, "active": rf.field("active", i),
+                      "volume": np.full(len(rf.kind), dx**dim)}
+            Z.append(surge_front(line, arrays, dx) / a)
+        return rf.times * np.sqrt(2 * 9.81 / a), np.array(Z)

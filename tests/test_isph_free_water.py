@@ -126,27 +126,28 @@ def _reference(name):
 def test_dambreak_front_martin_moyce(run_cli, tmp_path):
     """2D dam break, column a = 0.1 m x 2a, dx = a / 20: surge front Z = z / a against T = t sqrt(2 g / a).
 
-    Front = the largest x of the water particles (leading particle centre). Measured at this
-    setting against both Martin & Moyce series: +13.6 % / +11.6 % at T = 1.2, then +6.3, +5.8, +3.7,
-    +2.9 and -1.4 % for T in [1.5, 3]. The experiment's front lags early on while the gate is pulled
-    (the simulation releases instantly), so the first point is held to 15 % and the rest to 10 %.
+    Front = the edge of the water body on the floor (conftest.surge_front_series; it reads Z = 1.000 at
+    T = 0, the leading particle centre 0.975). Measured against the two Martin & Moyce series: +14.9 /
+    +12.9 % at T = 1.2, then +7.5, +7.0, +4.8, +4.0 and -0.5 % for T in [1.5, 3] (docs/isph.md,
+    "Dam-break front"). The early lead is the experiment's release, not the scheme: Koshizuka & Oka's
+    experiment of the same column is 5 % ahead of Martin & Moyce there and the simulation is within
+    6.6 % of it, and no numerical parameter moves it (c0, viscosity, shifting, walls, resolution: it grows
+    with resolution). Bounds: 16 % for the point at T = 1.2 (measured + 1.1 points), 10 % after.
     """
+    from .conftest import surge_front_series
+
     out = tmp_path / "db.h5"
     r = run_cli("--config", "configs/dambreak.yaml", "--set", "end_time=0.3", "--out", out, "--no-progress")
     assert r.returncode == 0, r.stderr
-    a = 0.1
-    with RunFile(out) as rf:
-        water = rf.kind == 0
-        T = rf.times * np.sqrt(2 * G / a)
-        Z = np.array([rf.field("position", i)[water & rf.field("active", i)][:, 0].max() / a
-                      for i in range(rf.n_frames)])
+    T, Z = surge_front_series(out, 0.1)
+    assert Z[0] == pytest.approx(1.0, abs=0.005)  # the front starts at the column face
     for name in ("martin_moyce_a1.125in_n2sq2", "martin_moyce_a2.25in_n2sq2"):
         ref = _reference(name)
         sel = (ref[:, 0] >= 1.0) & (ref[:, 0] <= 3.0)
         err = np.interp(ref[sel, 0], T, Z) / ref[sel, 1] - 1
         early = ref[sel, 0] < 1.5
         assert np.all(np.abs(err[~early]) < 0.10), (name, err)
-        assert np.all(np.abs(err[early]) < 0.15), (name, err)
+        assert np.all(np.abs(err[early]) < 0.16), (name, err)
     # the front advances monotonically once released
     assert np.all(np.diff(Z[T > 0.5]) > -0.05)
 

@@ -11,6 +11,7 @@ from taichi_sph.probes import (
     ProbeSet,
     mean_velocity_in_box,
     pressure_at,
+    surge_front,
     water_level,
     water_volume_in_box,
 )
@@ -142,3 +143,29 @@ def test_csv_equals_run_file_and_loads_with_numpy(tmp_path):
         got = np.stack([table[c][rows] for c in cols], axis=1)
         np.testing.assert_array_equal(got, v.reshape(len(t), -1))
     assert len(probes["level"][0]) == 3 and len(probes["vol"][0]) == 13 and len(probes["p_mid"][0]) == 7
+
+
+def test_surge_front_is_the_edge_of_the_water_body():
+    """A column [0, a] x [0, 2a] on a floor: the front on the line of the first particle layer reads the
+    face itself (the leading particle centre lies dx / 2 behind it); a lone droplet ahead does not count; a
+    film one particle thick on the floor does, up to the edge of its last particle."""
+    a = 0.2
+    water = _lattice([0, 0], [a, 2 * a])
+    wall = np.concatenate([_lattice([-3 * DX, -3 * DX], [1.0, 0]), _lattice([-3 * DX, 0], [0, 2 * a])])
+
+    def arrays(extra):
+        pos = np.concatenate([water, extra, wall])
+        kind = np.r_[np.zeros(len(water) + len(extra)), np.ones(len(wall))].astype(np.int8)
+        return {"position": pos, "kind": kind, "active": np.ones(len(pos), bool),
+                "volume": np.full(len(pos), DX * DX)}
+
+    line = [0.0, DX / 2]
+    # measured 0.0015 dx off at the floor and 0.003 dx higher up: the kernel sum of a half-lattice is 0.5
+    # at its edge to a few 1e-3; bound 0.02 dx
+    assert surge_front(line, arrays(np.zeros((0, 2))), DX) == pytest.approx(a, abs=0.02 * DX)
+    assert surge_front([0.0, a], arrays(np.zeros((0, 2))), DX) == pytest.approx(a, abs=0.02 * DX)
+    droplet = np.array([[a + 4.5 * DX, DX / 2]])
+    assert surge_front(line, arrays(droplet), DX) == pytest.approx(a, abs=0.02 * DX)
+    # a 10-particle film reads 9.67 dx: its last particle alone holds phi = 0.5 about 0.17 dx past its centre
+    film = np.stack([a + DX / 2 + DX * np.arange(10), np.full(10, DX / 2)], axis=1)
+    assert 9.5 * DX < surge_front(line, arrays(film), DX) - a < 10.0 * DX
