@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene import AIR, WALL, WATER
+from ..scene import AIR, SOIL, WALL, WATER
 from . import eos
+from .soil import geostatic_stress
 
 
 def column_pressure(position: np.ndarray, rho0: np.ndarray, dx: float, g_down: float) -> np.ndarray:
@@ -91,5 +92,40 @@ def initial_state(cfg, scene, materials: dict) -> dict:
                 continue
             face = inside & (x[:, 0] > x[inside, 0].max() - 0.5 * dx)
             vel[face, 0] = np.sqrt(2.0 * g_down * np.maximum(hi[-1] - x[face, -1], 0.0))
-    return {"density": rho, "mass": mass, "velocity": vel, "pressure": p,
-            "wall_depth": wall_depth(scene.position, kind, cfg.tank.size, cfg.obstacles)}
+    out = {"density": rho, "mass": mass, "velocity": vel, "pressure": p,
+           "wall_depth": wall_depth(scene.position, kind, cfg.tank.size, cfg.obstacles)}
+    out["stress"] = soil_start(cfg, scene, rho, mass, materials[WATER][0])
+    return out
+
+
+def soil_start(cfg, scene, rho: np.ndarray, mass: np.ndarray, rho_w: float) -> np.ndarray:
+    """Soil particles (in place): density (1 - n0) rho_s and mass (1 - n0) rho_s dx^dim; returns the
+    effective stress of every particle (N, dim, dim; zero but for soil) at the K0 start: the vertical
+    effective stress is the weight of the soil above in its lattice column, buoyant ((1 - n0)
+    (rho_s - rho_w) g per unit volume, i.e. gamma_sat - gamma_w) where a water particle shares the soil
+    particle's place and dry ((1 - n0) rho_s g) where not; horizontal K0 times that (K0 default
+    nu / (1 - nu))."""
+    dim, dx = cfg.dim, cfg.dx
+    kind = scene.kind
+    soil = kind == SOIL
+    stress = np.zeros((scene.n, dim, dim))
+    if not soil.any():
+        return stress
+    sp = cfg.wcsph.soil
+    rho_s = (1.0 - sp.porosity) * sp.grain_density
+    rho[soil] = rho_s
+    mass[soil] = rho_s * dx**dim
+    pos = scene.position[soil]
+    water = scene.position[kind == WATER]
+    submerged = np.zeros(len(pos), bool)
+    if len(water):
+        from scipy.spatial import cKDTree  # noqa: PLC0415  (start state only)
+
+        d, _ = cKDTree(water).query(pos, k=1)
+        submerged = d < 0.5 * dx
+    unit = (1.0 - sp.porosity) * (sp.grain_density - rho_w * submerged)
+    g_down = -float(np.asarray(cfg.gravity_vector())[-1])
+    sigma_v = column_pressure(pos, unit, dx, g_down)
+    k0 = sp.k0 if sp.k0 is not None else sp.poisson / (1.0 - sp.poisson)
+    stress[soil] = geostatic_stress(sigma_v, k0, dim)
+    return stress
