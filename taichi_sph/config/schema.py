@@ -317,6 +317,26 @@ class SoilBlock(Strict):
         return lo, hi
 
 
+class ExcessPorePressure(Strict):
+    """Initial excess pore pressure u_e = amplitude sin(pi (y - bottom) / (top - bottom)) for bottom <= y <=
+    top (y the vertical coordinate), added to the water's pressure inside the soil and taken from the
+    soil's vertical effective stress (K0 times it from the horizontal), so the total stress is unchanged
+    (seed 002 fig 10). The layer may reach below the tank floor: a layer drained at both faces is
+    symmetric about its middle, which an impermeable floor can stand for."""
+
+    #: largest excess pore pressure u0 (Pa)
+    amplitude: float
+    #: the layer's faces (m), where u_e = 0
+    bottom: float
+    top: float
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        if not self.top > self.bottom:
+            raise ValueError("top must exceed bottom")
+        return self
+
+
 class WCSPHSoil(Strict):
     """Soil of mode wcsph_biot (seed 002 sections 2.4 (2) and 2.5): elastic-perfectly-plastic effective
     stress (eq 42-45), compression positive; plane strain in 2D. Seed defaults."""
@@ -352,6 +372,8 @@ class WCSPHSoil(Strict):
     permeability: PosFloat = 1.0e-3
     #: velocity damping of the soil (1/s): a_s -= damping v_s, for a geostatic stage (0 = off)
     damping: NonNegFloat = 0.0
+    #: initial excess pore pressure (consolidation); none by default
+    initial_excess_pressure: ExcessPorePressure | None = None
 
 
 class WCSPH(Strict):

@@ -95,7 +95,37 @@ def initial_state(cfg, scene, materials: dict) -> dict:
     out = {"density": rho, "mass": mass, "velocity": vel, "pressure": p,
            "wall_depth": wall_depth(scene.position, kind, cfg.tank.size, cfg.obstacles)}
     out["stress"] = soil_start(cfg, scene, rho, mass, materials[WATER][0])
+    excess_pore_pressure(cfg, scene, p, rho, mass, out["stress"], materials[WATER])
     return out
+
+
+def excess_pore_pressure(cfg, scene, p, rho, mass, stress, water) -> None:
+    """`wcsph.soil.initial_excess_pressure` (in place): u_e = A sin(pi (y - bottom) / (top - bottom)) added
+    to the pressure of water particles that share a soil particle's place (their density from the Tait
+    EOS at the new pressure) and taken from the soil's effective stress (vertical u_e, horizontal K0 u_e)."""
+    ex = cfg.wcsph.soil.initial_excess_pressure
+    kind = scene.kind
+    if ex is None or not (kind == SOIL).any():
+        return
+    y = scene.position[:, -1]
+    u = np.where((y >= ex.bottom) & (y <= ex.top),
+                 ex.amplitude * np.sin(np.pi * (y - ex.bottom) / (ex.top - ex.bottom)), 0.0)
+    soil = np.nonzero(kind == SOIL)[0]
+    wat = np.nonzero(kind == WATER)[0]
+    if len(wat):
+        from scipy.spatial import cKDTree  # start state only
+
+        d, _ = cKDTree(scene.position[soil]).query(scene.position[wat], k=1)
+        wet = wat[d < 0.5 * cfg.dx]
+        p[wet] += u[wet]
+        rho[wet] = eos.density_np(p[wet], *water)
+        mass[wet] = rho[wet] * cfg.dx**cfg.dim
+    sp = cfg.wcsph.soil
+    k0 = sp.k0 if sp.k0 is not None else sp.poisson / (1.0 - sp.poisson)
+    dim = cfg.dim
+    for a in range(dim - 1):
+        stress[soil, a, a] -= k0 * u[soil]
+    stress[soil, dim - 1, dim - 1] -= u[soil]
 
 
 def soil_start(cfg, scene, rho: np.ndarray, mass: np.ndarray, rho_w: float) -> np.ndarray:
@@ -119,7 +149,7 @@ def soil_start(cfg, scene, rho: np.ndarray, mass: np.ndarray, rho_w: float) -> n
     water = scene.position[kind == WATER]
     submerged = np.zeros(len(pos), bool)
     if len(water):
-        from scipy.spatial import cKDTree  # noqa: PLC0415  (start state only)
+        from scipy.spatial import cKDTree  # start state only
 
         d, _ = cKDTree(water).query(pos, k=1)
         submerged = d < 0.5 * dx

@@ -182,7 +182,7 @@ class SoilStep:
                         acc -= mw * pij * gw
                         if ti.static(self.coupled):
                             gradp += self.phi_w[i] * self.vol0 * self.rho_w * self.g.dot(xw - xi) * gw
-                    elif kj == WATER:
+                    elif kj == WATER:  # noqa: SIM102 (compile-time if)
                         if ti.static(self.coupled):
                             gradp += sj[self.S_M] / self.rho[j] * (self.p[j] - pore_i) * gw
                 if ti.static(self.coupled):

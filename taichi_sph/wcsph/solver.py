@@ -33,15 +33,14 @@ import time as _time
 import numpy as np
 import taichi as ti
 
-from ..errors import InstabilityError
-from ..sph import operators
 from ..backend import ids_text, is_f64
+from ..errors import InstabilityError
 from ..scene import AIR, SOIL, WALL, WATER
-from ..sph import kernels
+from ..sph import kernels, operators
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
 from . import eos, terms
-from .soil_step import SoilStep
 from .initial import initial_state
+from .soil_step import SoilStep
 
 log = logging.getLogger("taichi_sph")
 
@@ -283,7 +282,7 @@ class WCSPHSolver(SoilStep):
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             self.fmask[i] = 1 if (self.active[i] == 1 and self.kind[i] != WALL) else 0
-            if ti.static(self.has_soil):
+            if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if)
                 if self.active[i] == 1 and self.kind[i] == SOIL:
                     self.fmask[i] = 2  # soil: moved by kick-drift, its own passes (soil_step.py)
 
@@ -356,7 +355,7 @@ class WCSPHSolver(SoilStep):
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
-                    if ti.static(self.has_soil):  # soil is its own set: only the drag couples it (eq 46)
+                    if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if); soil couples by drag only
                         if sj[self.S_KIND] == SOIL:
                             continue
                     hij = self._h_pair(hi, sj)
@@ -476,7 +475,7 @@ class WCSPHSolver(SoilStep):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
                     qj = self.q[j]
-                    if ti.static(self.has_soil):
+                    if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if)
                         if sj[self.S_KIND] == SOIL:
                             continue
                     hij = self.h0
