@@ -212,6 +212,25 @@ def remove_overlaps(keep: np.ndarray, others: np.ndarray, dist: float) -> np.nda
     return d > dist
 
 
+def soil_particles(cfg, wall: np.ndarray) -> np.ndarray:
+    """Soil particles of mode wcsph_biot: the cell-centred lattice of spacing dx inside each soil block
+    (box or mound, faces included), without repeats where blocks overlap and clear of wall particles.
+    They overlap water and air: the fluid in the soil's pores is the fluid particles at the same places."""
+    dim, dx = cfg.dim, cfg.dx
+    size = np.asarray(cfg.tank.size, float)
+    soil = np.zeros((0, dim))
+    for blk in getattr(cfg, "soil_blocks", []):
+        lo, hi = blk.bounds(dim, size)
+        if blk.shape == "box":
+            pts = lattice_in_box(lo, hi, dx)
+        else:  # the tank's lattice, cut by the trapezoid
+            pts = lattice_in_box(np.zeros(dim), size, dx)
+            pts = pts[inside_region(pts, blk, dim, size)]
+        pts = pts[remove_overlaps(pts, soil, 0.5 * dx) & remove_overlaps(pts, wall, 0.5 * dx)]
+        soil = np.concatenate([soil, pts])
+    return soil
+
+
 def build_scene(cfg) -> Scene:
     """Particles for a validated Config (water blocks, tank walls, obstacles)."""
     dim, dx = cfg.dim, cfg.dx
@@ -243,6 +262,9 @@ def build_scene(cfg) -> Scene:
     normal = np.concatenate([np.zeros_like(water), wall_n])
     position, normal = np.concatenate([position, air]), np.concatenate([normal, np.zeros_like(air)])
     kind = np.concatenate([kind, np.full(len(air), AIR, np.int8)])
+    soil = soil_particles(cfg, wall)
+    position, normal = np.concatenate([position, soil]), np.concatenate([normal, np.zeros_like(soil)])
+    kind = np.concatenate([kind, np.full(len(soil), SOIL, np.int8)])
 
     r_e = SUPPORT_FACTOR * dx
     lo = -(layers + 1) * dx * np.ones(dim)

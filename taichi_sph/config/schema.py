@@ -272,6 +272,110 @@ class ArtificialViscosity(Strict):
     eps: PosFloat = 0.1
 
 
+class SoilBlock(Strict):
+    """A block of soil particles (mode wcsph_biot): box, or a trapezoidal mound (levee) in the plane of
+    the first and the vertical axis, across the whole tank along y in 3D. Water blocks may overlap it:
+    their particles are then its pore water."""
+
+    #: box: an axis-aligned block [min, max]; mound: a trapezoid with its base from toe[0] to toe[1] at
+    #: height `bottom` and its crest from crest[0] to crest[1] at height `top`
+    shape: Literal["box", "mound"] = "box"
+    #: box corners (m)
+    min: Optional[list[float]] = None
+    max: Optional[list[float]] = None
+    #: mound: [x_left, x_right] of its base and of its crest (m)
+    toe: Optional[list[float]] = None
+    crest: Optional[list[float]] = None
+    #: mound: heights of its base and of its crest (m)
+    bottom: float = 0.0
+    top: Optional[float] = None
+
+    @model_validator(mode="after")
+    def _shape_keys(self):
+        if self.shape == "box":
+            if self.min is None or self.max is None:
+                raise ValueError("a box block needs min and max")
+            Box(min=self.min, max=self.max)
+        else:
+            if self.toe is None or self.crest is None or self.top is None:
+                raise ValueError("a mound block needs toe, crest and top")
+            for key, pair in (("toe", self.toe), ("crest", self.crest)):
+                if len(pair) != 2 or not pair[1] > pair[0]:
+                    raise ValueError(f"{key} must be [x_left, x_right] with x_right > x_left")
+            if not self.top > self.bottom:
+                raise ValueError("top must exceed bottom")
+            if self.crest[0] < self.toe[0] or self.crest[1] > self.toe[1]:
+                raise ValueError("the crest must lie within the toe")
+        return self
+
+    def bounds(self, dim: int, tank_size) -> tuple[list[float], list[float]]:
+        """Bounding box [lo, hi] (m)."""
+        if self.shape == "box":
+            return list(self.min), list(self.max)
+        lo = [self.toe[0]] + ([0.0] if dim == 3 else []) + [self.bottom]
+        hi = [self.toe[1]] + ([float(tank_size[1])] if dim == 3 else []) + [self.top]
+        return lo, hi
+
+
+class ExcessPorePressure(Strict):
+    """Initial excess pore pressure u_e = amplitude sin(pi (y - bottom) / (top - bottom)) for bottom <= y <=
+    top (y the vertical coordinate), added to the water's pressure inside the soil and taken from the
+    soil's vertical effective stress (K0 times it from the horizontal), so the total stress is unchanged
+    (seed 002 fig 10). The layer may reach below the tank floor: a layer drained at both faces is
+    symmetric about its middle, which an impermeable floor can stand for."""
+
+    #: largest excess pore pressure u0 (Pa)
+    amplitude: float
+    #: the layer's faces (m), where u_e = 0
+    bottom: float
+    top: float
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        if not self.top > self.bottom:
+            raise ValueError("top must exceed bottom")
+        return self
+
+
+class WCSPHSoil(Strict):
+    """Soil of mode wcsph_biot (seed 002 sections 2.4 (2) and 2.5): elastic-perfectly-plastic effective
+    stress (eq 42-45), compression positive; plane strain in 2D. Seed defaults."""
+
+    #: initial porosity n0 (seed: 0.4); the soil particles' density is (1 - n) grain_density
+    porosity: Annotated[float, Field(gt=0, lt=1)] = 0.4
+    #: density of the grains rho_s (kg/m^3)
+    grain_density: PosFloat = 2650.0
+    #: reference Young's modulus E0 at the reference mean stress p0 of eq 42 (Pa) (seed: 150 MPa)
+    youngs_modulus: PosFloat = 1.5e8
+    #: reference mean effective stress p0 of eq 42 (Pa) (seed: 100 kPa)
+    reference_stress: PosFloat = 1.0e5
+    #: exponent m of eq 42 (seed: 0.5)
+    exponent: NonNegFloat = 0.5
+    #: floor of the mean effective stress used in eq 42 (Pa): E = E0 (max(p, floor) / p0)^m, so that soil
+    #: at a free surface (p -> 0) keeps a stiffness and a sound speed
+    stress_floor: PosFloat = 1000.0
+    #: Poisson's ratio nu (seed: 0.3)
+    poisson: Annotated[float, Field(gt=0, lt=0.5)] = 0.3
+    #: tan(phi), phi the friction angle at failure: tau_f = p tan(phi) + cohesion (seed: 0.5)
+    tan_phi: NonNegFloat = 0.5
+    #: cohesion c (Pa) (seed: none)
+    cohesion: NonNegFloat = 0.0
+    #: largest mean tension the soil carries (Pa, >= 0); beyond it the stress is set to zero (tension
+    #: cut-off). Default: the tension at which tau_f vanishes, cohesion / tan(phi) (0 without cohesion)
+    tension_cutoff: NonNegFloat | None = None
+    #: initial ratio of horizontal to vertical effective stress K0; default nu / (1 - nu) (elastic, at rest)
+    k0: PosFloat | None = None
+    #: Monaghan artificial viscosity alpha of eq 36 between soil particles (seed: 0.001); c_ij the soil's
+    #: P-wave speed
+    alpha: NonNegFloat = 0.001
+    #: permeability k of eq 46 (m/s) (hydraulic conductivity)
+    permeability: PosFloat = 1.0e-3
+    #: velocity damping of the soil (1/s): a_s -= damping v_s, for a geostatic stage (0 = off)
+    damping: NonNegFloat = 0.0
+    #: initial excess pore pressure (consolidation); none by default
+    initial_excess_pressure: ExcessPorePressure | None = None
+
+
 class WCSPH(Strict):
     """Options of mode wcsph_biot (weakly compressible SPH, seed 002)."""
 
@@ -306,6 +410,8 @@ class WCSPH(Strict):
     #: neighbour lists hold pairs up to (1 + skin) x the support radius and are rebuilt only when some
     #: particle has moved far enough to need it (performance; results do not depend on it)
     neighbour_skin: Annotated[float, Field(ge=0, le=0.5)] = 0.2
+    #: soil material (used when `soil_blocks` are given)
+    soil: WCSPHSoil = WCSPHSoil()
 
 
 class TimeStep(Strict):
@@ -366,8 +472,9 @@ class Config(Strict):
     fluid: Fluid = Fluid()
     #: the tank (required)
     tank: Tank
-    #: water blocks (m), each filled with particles on a lattice of spacing dx
-    water: list[WaterBlock] = Field(min_length=1)
+    #: water blocks (m), each filled with particles on a lattice of spacing dx (at least one, unless mode
+    #: wcsph_biot has soil blocks)
+    water: list[WaterBlock] = []
     #: solid blocks of wall particles inside the tank (m)
     obstacles: list[Obstacle] = []
     #: porous ground (mode isph): soil-marker regions and drag constants
@@ -378,6 +485,8 @@ class Config(Strict):
     air: list[Box] = []
     #: options of mode wcsph_biot
     wcsph: WCSPH = WCSPH()
+    #: soil particle blocks (m), mode wcsph_biot: a lattice of spacing dx overlapping any water block
+    soil_blocks: list[SoilBlock] = []
     #: adaptive time-step limits (dt = auto)
     timestep: TimeStep = TimeStep()
     #: neighbour-list capacity
@@ -414,7 +523,8 @@ class Config(Strict):
         if self.wcsph.water.expected_speed is not None:
             return self.wcsph.water.expected_speed
         g = sum(c * c for c in self.gravity_vector()) ** 0.5
-        top = max(box.max[-1] for box in [*self.water, *self.air])
+        top = max([box.max[-1] for box in [*self.water, *self.air]]
+                  + [blk.bounds(self.dim, self.tank.size)[1][-1] for blk in self.soil_blocks])
         return max((2.0 * g * top) ** 0.5, 1.0e-3)
 
     def sound_speed(self) -> float:
@@ -457,6 +567,7 @@ def check(cfg: "Config") -> None:
         _need_len(box.min, d, f"air[{k}].min")
         _need_len(box.max, d, f"air[{k}].max")
         _inside(box, cfg.tank.size, f"air[{k}]")
+    _check_soil_blocks(cfg)
     _check_mode_sections(cfg)
     if isinstance(cfg.dt, float) and cfg.output.every < cfg.dt:
         _fail("output.every", f"must be at least dt = {cfg.dt}")
@@ -569,3 +680,23 @@ def _check_mode_sections(cfg: Config) -> None:
             _fail(keys[0], f"applies to mode wcsph_biot only (mode is {cfg.mode})")
         if cfg.air:
             _fail("air", f"air blocks need mode wcsph_biot (mode is {cfg.mode})")
+
+
+def _check_soil_blocks(cfg: "Config") -> None:
+    """Soil blocks need mode wcsph_biot, `dim` values and must lie in the tank; water blocks are needed
+    unless there is soil."""
+    if not cfg.water and not (cfg.mode == "wcsph_biot" and cfg.soil_blocks):
+        _fail("water", "needs at least one water block (mode wcsph_biot may have soil blocks instead)")
+    if cfg.soil_blocks and cfg.mode != "wcsph_biot":
+        _fail("soil_blocks", f"soil particles need mode wcsph_biot (mode is {cfg.mode}; mode isph has `soil`)")
+    for k, blk in enumerate(cfg.soil_blocks):
+        key = f"soil_blocks[{k}]"
+        if blk.shape == "box":
+            _need_len(blk.min, cfg.dim, f"{key}.min")
+            _need_len(blk.max, cfg.dim, f"{key}.max")
+        lo, hi = blk.bounds(cfg.dim, cfg.tank.size)
+        _inside(Box(min=lo, max=hi), cfg.tank.size, key)
+    soil = cfg.wcsph.soil
+    if soil.tension_cutoff is not None and soil.tan_phi > 0 and soil.tension_cutoff > soil.cohesion / soil.tan_phi:
+        _fail("wcsph.soil.tension_cutoff", f"must not exceed cohesion / tan_phi = {soil.cohesion / soil.tan_phi:g} Pa "
+              "(beyond it the failure shear stress would be negative)")

@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene import AIR, WALL, WATER
+from ..scene import AIR, SOIL, WALL, WATER
 from . import eos
+from .soil import geostatic_stress
 
 
 def column_pressure(position: np.ndarray, rho0: np.ndarray, dx: float, g_down: float) -> np.ndarray:
@@ -91,5 +92,70 @@ def initial_state(cfg, scene, materials: dict) -> dict:
                 continue
             face = inside & (x[:, 0] > x[inside, 0].max() - 0.5 * dx)
             vel[face, 0] = np.sqrt(2.0 * g_down * np.maximum(hi[-1] - x[face, -1], 0.0))
-    return {"density": rho, "mass": mass, "velocity": vel, "pressure": p,
-            "wall_depth": wall_depth(scene.position, kind, cfg.tank.size, cfg.obstacles)}
+    out = {"density": rho, "mass": mass, "velocity": vel, "pressure": p,
+           "wall_depth": wall_depth(scene.position, kind, cfg.tank.size, cfg.obstacles)}
+    out["stress"] = soil_start(cfg, scene, rho, mass, materials[WATER][0])
+    excess_pore_pressure(cfg, scene, p, rho, mass, out["stress"], materials[WATER])
+    return out
+
+
+def excess_pore_pressure(cfg, scene, p, rho, mass, stress, water) -> None:
+    """`wcsph.soil.initial_excess_pressure` (in place): u_e = A sin(pi (y - bottom) / (top - bottom)) added
+    to the pressure of water particles that share a soil particle's place (their density from the Tait
+    EOS at the new pressure) and taken from the soil's effective stress (vertical u_e, horizontal K0 u_e)."""
+    ex = cfg.wcsph.soil.initial_excess_pressure
+    kind = scene.kind
+    if ex is None or not (kind == SOIL).any():
+        return
+    y = scene.position[:, -1]
+    u = np.where((y >= ex.bottom) & (y <= ex.top),
+                 ex.amplitude * np.sin(np.pi * (y - ex.bottom) / (ex.top - ex.bottom)), 0.0)
+    soil = np.nonzero(kind == SOIL)[0]
+    wat = np.nonzero(kind == WATER)[0]
+    if len(wat):
+        from scipy.spatial import cKDTree  # start state only
+
+        d, _ = cKDTree(scene.position[soil]).query(scene.position[wat], k=1)
+        wet = wat[d < 0.5 * cfg.dx]
+        p[wet] += u[wet]
+        rho[wet] = eos.density_np(p[wet], *water)
+        mass[wet] = rho[wet] * cfg.dx**cfg.dim
+    sp = cfg.wcsph.soil
+    k0 = sp.k0 if sp.k0 is not None else sp.poisson / (1.0 - sp.poisson)
+    dim = cfg.dim
+    for a in range(dim - 1):
+        stress[soil, a, a] -= k0 * u[soil]
+    stress[soil, dim - 1, dim - 1] -= u[soil]
+
+
+def soil_start(cfg, scene, rho: np.ndarray, mass: np.ndarray, rho_w: float) -> np.ndarray:
+    """Soil particles (in place): density (1 - n0) rho_s and mass (1 - n0) rho_s dx^dim; returns the
+    effective stress of every particle (N, dim, dim; zero but for soil) at the K0 start: the vertical
+    effective stress is the weight of the soil above in its lattice column, buoyant ((1 - n0)
+    (rho_s - rho_w) g per unit volume, i.e. gamma_sat - gamma_w) where a water particle shares the soil
+    particle's place and dry ((1 - n0) rho_s g) where not; horizontal K0 times that (K0 default
+    nu / (1 - nu))."""
+    dim, dx = cfg.dim, cfg.dx
+    kind = scene.kind
+    soil = kind == SOIL
+    stress = np.zeros((scene.n, dim, dim))
+    if not soil.any():
+        return stress
+    sp = cfg.wcsph.soil
+    rho_s = (1.0 - sp.porosity) * sp.grain_density
+    rho[soil] = rho_s
+    mass[soil] = rho_s * dx**dim
+    pos = scene.position[soil]
+    water = scene.position[kind == WATER]
+    submerged = np.zeros(len(pos), bool)
+    if len(water):
+        from scipy.spatial import cKDTree  # start state only
+
+        d, _ = cKDTree(water).query(pos, k=1)
+        submerged = d < 0.5 * dx
+    unit = (1.0 - sp.porosity) * (sp.grain_density - rho_w * submerged)
+    g_down = -float(np.asarray(cfg.gravity_vector())[-1])
+    sigma_v = column_pressure(pos, unit, dx, g_down)
+    k0 = sp.k0 if sp.k0 is not None else sp.poisson / (1.0 - sp.poisson)
+    stress[soil] = geostatic_stress(sigma_v, k0, dim)
+    return stress

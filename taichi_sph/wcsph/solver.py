@@ -33,14 +33,14 @@ import time as _time
 import numpy as np
 import taichi as ti
 
-from ..errors import InstabilityError
-from ..sph import operators
 from ..backend import ids_text, is_f64
-from ..scene import AIR, WALL, WATER
-from ..sph import kernels
+from ..errors import InstabilityError
+from ..scene import AIR, SOIL, WALL, WATER
+from ..sph import kernels, operators
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
 from . import eos, terms
 from .initial import initial_state
+from .soil_step import SoilStep
 
 log = logging.getLogger("taichi_sph")
 
@@ -57,7 +57,7 @@ SERIAL_BELOW = 2000
 
 
 @ti.data_oriented
-class WCSPHSolver:
+class WCSPHSolver(SoilStep):
     """State and step of mode `wcsph_biot` for water and air. Built from a validated Config and a Scene."""
 
     #: per-step diagnostics this solver reports (run.py adds time, dt, wall_seconds, dt_limit)
@@ -118,11 +118,15 @@ class WCSPHSolver:
             nus += [self.nu_a, (self.rho_a * self.nu_a + self.rho_w * self.nu_w) / (2.0 * self.rho_a)]
         self.nu_max = max(nus) if nus else 0.0
 
+        self._soil_setup(cfg, scene)
+
         self.h_lo = H_MIN * self.h0 if self.variable_h else self.h0
         self.h_hi = H_MAX * self.h0 if self.variable_h else self.h0
         self.skin = w.neighbour_skin * self.re
         self.cell = 2.0 * self.h_hi + self.skin
         self.max_nb = cfg.max_neighbours()
+        if self.has_soil and cfg.neighbours.max is None:  # soil overlaps the fluid: twice the neighbours
+            self.max_nb *= 2
 
         # packed neighbour views. s: x (dim), v (dim), rho, m, kind[, h] at the start of a step (read by the
         # density pass); q: rho, p / rho^2[, h] after the density pass (read by the force pass). Each
@@ -136,7 +140,7 @@ class WCSPHSolver:
         self.Q_RHO, self.Q_PR, self.Q_H = 0, 1, 2
         self.nq = 3 if self.variable_h else 2
         # small scenes run their loops serially: a parallel loop costs ~50 us of thread dispatch
-        self.serial = self.n_fluid < SERIAL_BELOW
+        self.serial = self.n_fluid + self.n_soil < SERIAL_BELOW
 
         vec = ti.Vector.field
         self.s = vec(self.ns, float, n)
@@ -164,6 +168,7 @@ class WCSPHSolver:
         self.fmask = ti.field(ti.i32, n)
         self.particle_fields = [self.x, self.v, self.a, self.xs, self.normal, self.rho, self.p, self.h, self.m,
                                 self.wdepth, self.kind, self.ids, self.active]
+        self._soil_fields(n)
 
         init = initial_state(cfg, scene, self.materials)
         self.np_fp = np.float64 if is_f64() else np.float32
@@ -182,6 +187,8 @@ class WCSPHSolver:
         self.a.fill(0.0)
         self.xs.fill(0.0)
         self.initial_density = init["density"]
+        if self.has_soil:
+            self.sig.from_numpy(init["stress"].astype(f))
 
         self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.cell, self.max_nb)
         self.r_list = 0.0  # list radius at the last build
@@ -275,6 +282,9 @@ class WCSPHSolver:
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             self.fmask[i] = 1 if (self.active[i] == 1 and self.kind[i] != WALL) else 0
+            if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if)
+                if self.active[i] == 1 and self.kind[i] == SOIL:
+                    self.fmask[i] = 2  # soil: moved by kick-drift, its own passes (soil_step.py)
 
     @ti.kernel
     def _k_after_build(self):
@@ -293,8 +303,11 @@ class WCSPHSolver:
         hmax = 0.0
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
-            if self.fmask[i] == 1:
-                vh = self.v[i] + 0.5 * (dt_prev + dt) * self.a[i]
+            if self.fmask[i] >= 1:
+                ai = self.a[i]
+                if ti.static(self.has_soil):
+                    ai += self.adrag[i]
+                vh = self.v[i] + 0.5 * (dt_prev + dt) * ai
                 self.v[i] = vh
                 xn = self.x[i] + dt * vh
                 if ti.static(self.xsph_on):
@@ -342,6 +355,9 @@ class WCSPHSolver:
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
+                    if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if); soil couples by drag only
+                        if sj[self.S_KIND] == SOIL:
+                            continue
                     hij = self._h_pair(hi, sj)
                     rij = xi - self._pos(sj)
                     r2 = rij.dot(rij)
@@ -459,6 +475,9 @@ class WCSPHSolver:
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
                     qj = self.q[j]
+                    if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if)
+                        if sj[self.S_KIND] == SOIL:
+                            continue
                     hij = self.h0
                     if ti.static(self.variable_h):
                         hij = 0.5 * (hi + qj[self.Q_H])
@@ -589,8 +608,12 @@ class WCSPHSolver:
             self.neighbour_search()
         t0 = self._tick("neighbours", t0)
         self._k_density(dt, self.normalised and self.step_count % self.normalise_every == 0)
+        if self.has_soil:
+            self._soil_stress(dt)
         self._tick("density", t0)
         self._forces(dt)
+        if self.has_soil:
+            self._soil_forces(dt)
         self.dt_prev = dt
         return self.last
 
@@ -598,6 +621,8 @@ class WCSPHSolver:
         """Neighbour lists, wall pressure and forces at t = 0 (the first step needs a^0)."""
         self.neighbour_search()
         self._forces(0.0)
+        if self.has_soil:
+            self._soil_forces(0.0)
         return self.last
 
     def propose_dt(self) -> tuple[float, int]:
@@ -610,6 +635,10 @@ class WCSPHSolver:
         limits = {DT_CFL: ts.cfl * float(r[4]), DT_FORCE: ts.force * math.sqrt(float(r[3]))}
         if self.nu_max > 0.0:
             limits[DT_VISCOUS] = ts.viscous * float(r[7]) ** 2 / self.nu_max
+        if self.has_soil:
+            rs = self.red_s
+            limits[DT_CFL] = min(limits[DT_CFL], ts.cfl * float(rs[3]))
+            limits[DT_FORCE] = min(limits[DT_FORCE], ts.force * math.sqrt(float(rs[2])))
         which = min(limits, key=limits.get)
         if limits[which] < ts.min:
             raise InstabilityError(
@@ -630,13 +659,16 @@ class WCSPHSolver:
         vel[kind == WALL] = 0.0
         rho = self.rho.to_numpy()[order]
         rho = np.where(kind == WALL, self.rho_w, rho)
-        return {
+        out = {
             "position": self.x.to_numpy()[order],
             "velocity": vel,
             "pressure": self.p.to_numpy()[order],
             "density": rho,
             "active": self.active.to_numpy()[order].astype(bool),
         }
+        if self.has_soil:
+            out.update(self._soil_output(order))
+        return out
 
     def max_speed_bound(self) -> float:
         if self.cfg.guard.max_speed is not None:
