@@ -1,4 +1,5 @@
-"""Weakly compressible SPH step of mode wcsph_biot (seed 002 sections 2.3-2.6): water and air.
+"""Weakly compressible SPH step of mode wcsph_biot (seed 002 sections 2.3-2.6): water and air; soil
+particles and the Biot drag (sections 2.4-2.5) come in through soil_step.py (docs/biot.md).
 
 State per fluid particle: position x, leap-frog velocity v (at half steps), density rho, gauge
 pressure p, smoothing length h, mass m, kind (water 0, air 3). Wall particles (kind 1) are fixed
