@@ -6,6 +6,7 @@ Every failure raises InputError with one line that names the file or the key.
 from __future__ import annotations
 
 import copy
+import re
 from pathlib import Path
 
 import yaml
@@ -34,8 +35,8 @@ def parse_overrides(items) -> list[tuple[str, object]]:
 
 
 def set_dotted(data: dict, key: str, value) -> None:
-    """Set data[a][b][c] = value for key 'a.b.c'; integer parts index lists."""
-    parts = key.split(".")
+    """Set data[a][b][c] = value for key 'a.b.c'; integer parts index lists ('a.0.b' or 'a[0].b')."""
+    parts = re.sub(r"\[(\d+)\]", r".\1", key).split(".")
     node = data
     for n, part in enumerate(parts[:-1]):
         nxt = parts[n + 1]
