@@ -150,8 +150,10 @@ def plan_from_args(args) -> dict:
         case = dict(case)
         label = case.pop("name", None)
         for combo in itertools.product(*(grid[key] for key in keys)):
-            params = {**case, **dict(zip(keys, combo))}
-            name = _case_name(label, params, len(listed) > 1 and label is None, k)
+            swept = dict(zip(keys, combo))
+            params = {**case, **swept}
+            # a named case is called by its name (and the grid values it is crossed with)
+            name = _case_name(label, swept if label is not None else params, len(listed) > 1 and label is None, k)
             cases.append({"name": name, "params": params, "overrides": {**common, **params}})
     _unique_names(cases)
     for case in cases:
