@@ -174,7 +174,7 @@ def _case_name(label, params: dict, numbered: bool, k: int) -> str:
     parts = [str(label)] if label is not None else ([f"case{k}"] if numbered else [])
     for key, value in params.items():
         last = re.sub(r"\[\d+\]", "", key.split(".")[-1])
-        parts.append(f"{last}{_text(value)}")
+        parts.append(f"{last}-{_text(value)}")
     name = "_".join(parts) or "case"
     return re.sub(r"[^A-Za-z0-9._-]+", "-", name)[:120]
 

@@ -124,7 +124,8 @@ def test_grid_is_every_combination():
                               param=["water[0].max=[0.4,0.16],[0.4,0.24]", "dt=0.002,0.001"], workers=None)
     plan = plan_from_args(args)
     names = [c["name"] for c in plan["cases"]]
-    assert names == ["max0.4x0.16_dt0.002", "max0.4x0.16_dt0.001", "max0.4x0.24_dt0.002", "max0.4x0.24_dt0.001"]
+    assert names == ["max-0.4x0.16_dt-0.002", "max-0.4x0.16_dt-0.001", "max-0.4x0.24_dt-0.002",
+                     "max-0.4x0.24_dt-0.001"]
     assert plan["cases"][3]["config"].dt == 0.001
     assert plan["cases"][3]["config"].water[0].max == [0.4, 0.24]
 
@@ -151,3 +152,11 @@ def test_metric_reductions_against_closed_forms():
     assert math.isnan(reduce(t, v, "at", time=4.0))
     assert reduce(t, v, "max") == pytest.approx(1.0, abs=1e-6)
     assert reduce(t, v, "final") == v[-1]
+
+
+def test_freefall_sweep_file_plans_the_three_porosities():
+    args = argparse.Namespace(sweep_file=str(DATA.parent.parent / "configs" / "freefall_sweep.yaml"), config=None, out=None, overrides=[], param=[],
+                              workers=None)
+    plan = plan_from_args(args)
+    assert [c["config"].soil.regions[0].eps0 for c in plan["cases"]] == [0.3, 0.5, 0.8]
+    assert [m.name for m in plan["cases"][0]["config"].metrics][:2] == ["arrival_time", "layer_volume_at_arrival"]
