@@ -136,9 +136,18 @@ def _cmd_run(args) -> int:
 def _cmd_resume(args) -> int:
     if args.quiet:
         logging.getLogger().setLevel(logging.WARNING)
-    from .run import resume
+    from .config.load import load_run_config
+    from .io.checkpoint import CheckpointError, latest_checkpoint
 
-    summary = resume(args.run_file, args.overrides, arch=args.arch, progress=False if args.no_progress else None)
+    cfg = load_run_config(args.run_file, args.overrides)  # every check before Taichi starts
+    try:
+        checkpoint = latest_checkpoint(args.run_file)
+    except CheckpointError as exc:
+        raise InputError(str(exc)) from None
+    from .run import run
+
+    summary = run(cfg, out_path=args.run_file, arch=args.arch, progress=False if args.no_progress else None,
+                  resume_from=checkpoint)
     log.info("done: %d steps in %.1f s -> %s", summary["steps"], summary["wall_seconds"], args.run_file)
     return 0
 

@@ -445,33 +445,3 @@ def _resume_state(solver, checkpoint) -> dict:
     except StateMismatchError as exc:
         raise InputError(f"checkpoint '{checkpoint}' does not fit the config: {exc}") from None
     return driver
-
-
-#: sections of a resolved config that belong to the other mode
-_OTHER_MODE_SECTIONS = {"isph": ("wcsph", "air"), "wcsph_biot": ("isph", "soil")}
-
-
-def resume(run_path, overrides=(), arch: str | None = None, progress: bool | None = None) -> dict:
-    """Continue a run from its newest checkpoint to end_time (or a new one given in `overrides`),
-    with the config stored in the run file."""
-    import yaml
-
-    from .config import load_config
-    from .errors import InputError
-    from .io.checkpoint import CheckpointError, latest_checkpoint
-    from .io.hdf5 import RunFile, RunFileError
-
-    try:
-        with RunFile(run_path) as rf:
-            raw = yaml.safe_load(rf.config_yaml)
-        checkpoint = latest_checkpoint(run_path)
-    except (RunFileError, CheckpointError) as exc:
-        raise InputError(str(exc)) from None
-    if not isinstance(raw, dict):
-        raise InputError(f"{run_path}: the run file holds no config")
-    # the stored config is fully resolved: it holds the other mode's sections at their defaults, which a
-    # config may not set explicitly
-    for key in _OTHER_MODE_SECTIONS.get(raw.get("mode"), ()):
-        raw.pop(key, None)
-    cfg = load_config(data=raw, overrides=overrides)
-    return run(cfg, out_path=run_path, arch=arch, progress=progress, resume_from=checkpoint)
