@@ -54,7 +54,20 @@ def _parser() -> argparse.ArgumentParser:
     pl.add_argument("run_file", help="run file (HDF5)")
     pl.add_argument("--out", help="folder for the plots (default: beside the run file)")
 
-    for name in ("sweep", "resume", "bench", "validate"):
+    rs = sub.add_parser("resume", help="continue a run from its newest checkpoint")
+    rs.add_argument("run_file", help="run file (HDF5) whose <run>.checkpoints/ holds a checkpoint")
+    rs.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a config entry, e.g. end_time=5 to run on further; repeatable")
+    rs.add_argument("--arch", choices=["cpu", "cuda", "vulkan", "auto"], help="Taichi backend")
+    rs.add_argument("--no-progress", action="store_true", help="no progress bar")
+    rs.add_argument("--quiet", "-q", action="store_true", help="warnings and errors only")
+
+    from .sweep import add_arguments as _sweep_arguments
+
+    sw = sub.add_parser("sweep", help="run a grid or list of cases in parallel and gather their metrics")
+    _sweep_arguments(sw)
+
+    for name in ("bench", "validate"):
         s = sub.add_parser(name, help="not available in this version")
         s.add_argument("args", nargs=argparse.REMAINDER)
     return p
@@ -82,6 +95,12 @@ def main(argv=None) -> int:
             from .plot import run_command as plot_command
 
             return plot_command(args)
+        if args.command == "resume":
+            return _cmd_resume(args)
+        if args.command == "sweep":
+            from .sweep import run_command as sweep_command
+
+            return sweep_command(args)
         raise InputError(f"'{args.command}' is not available in this version")
     except InputError as exc:
         print(f"taichi-sph: error: {exc}", file=sys.stderr)
@@ -111,6 +130,25 @@ def _cmd_run(args) -> int:
     drift = summary.get("volume_drift")
     log.info("done: %d steps in %.1f s (%.3g M particle-steps/s)%s -> %s", summary["steps"], summary["wall_seconds"],
              summary["mipps"], f", volume drift {drift:+.3%}" if drift is not None else "", out)
+    return 0
+
+
+def _cmd_resume(args) -> int:
+    if args.quiet:
+        logging.getLogger().setLevel(logging.WARNING)
+    from .config.load import load_run_config
+    from .io.checkpoint import CheckpointError, latest_checkpoint
+
+    cfg = load_run_config(args.run_file, args.overrides)  # every check before Taichi starts
+    try:
+        checkpoint = latest_checkpoint(args.run_file)
+    except CheckpointError as exc:
+        raise InputError(str(exc)) from None
+    from .run import run
+
+    summary = run(cfg, out_path=args.run_file, arch=args.arch, progress=False if args.no_progress else None,
+                  resume_from=checkpoint)
+    log.info("done: %d steps in %.1f s -> %s", summary["steps"], summary["wall_seconds"], args.run_file)
     return 0
 
 

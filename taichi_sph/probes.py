@@ -276,12 +276,12 @@ class ProbeRecorder:
     """Samples a ProbeSet and records it: rows appended to ``<run>.probes.csv`` as they are taken,
     samples buffered and appended to ``/probes/<name>/time|value`` of the run file by `flush`."""
 
-    def __init__(self, probe_set: ProbeSet, writer, csv_path: str | Path):
+    def __init__(self, probe_set: ProbeSet, writer, csv_path: str | Path, keep_csv_rows: int | None = None):
         from .io.probe_csv import ProbeCSVWriter
 
         self.set = probe_set
         self.writer = writer
-        self.csv = ProbeCSVWriter(csv_path, probe_set.columns())
+        self.csv = ProbeCSVWriter(csv_path, probe_set.columns(), keep_rows=keep_csv_rows)
         self._buf: dict[str, tuple[list, list]] = {p.name: ([], []) for p in probe_set.probes}
 
     def due(self, t: float) -> list[int]:

@@ -98,9 +98,13 @@ class Progress:
             self.bar.close()
 
 
-def run(cfg, out_path: str | None = None, arch: str | None = None, progress: bool | None = None) -> dict:
+def run(cfg, out_path: str | None = None, arch: str | None = None, progress: bool | None = None,
+        resume_from: str | Path | None = None) -> dict:
     """Run a validated config to end_time; returns a summary dict. InstabilityError propagates after the
-    run file has been closed with every frame written so far and a last frame of the failing state."""
+    run file has been closed with every frame written so far and a last frame of the failing state.
+    With `resume_from` (a checkpoint of the run file `out_path`) the run continues from that checkpoint;
+    whatever the run file holds past it is cut away. SIGINT (Ctrl-C) stops after the current step and a
+    checkpoint; the summary's status is then "interrupted" and KeyboardInterrupt propagates."""
     from . import backend
     from .io.hdf5 import RunWriter
 
@@ -114,30 +118,47 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     stepper = TimeStepper(cfg, solver.g_abs)
     propose = getattr(solver, "propose_dt", None)  # solvers with their own stability limits
 
-    writer = RunWriter(out_path, mode=cfg.mode, dim=cfg.dim, dx=cfg.dx, arch=be["arch"], config_yaml=resolved_yaml(cfg),
-                       kind=scene.kind, ids=scene.ids, code_version=code_version(), markers=_markers_out(scene),
-                       attrs={"precision": be["precision"], "particle_mass": solver.mass, "rho_w": solver.rho_w,
-                              "n_water": solver.n_water, "support_radius": solver.re, "status": "running"})
+    saved = _resume_state(solver, resume_from) if resume_from is not None else None
+    if saved is None:
+        writer = RunWriter(out_path, mode=cfg.mode, dim=cfg.dim, dx=cfg.dx, arch=be["arch"],
+                           config_yaml=resolved_yaml(cfg), kind=scene.kind, ids=scene.ids, code_version=code_version(),
+                           markers=_markers_out(scene),
+                           attrs={"precision": be["precision"], "particle_mass": solver.mass, "rho_w": solver.rho_w,
+                                  "n_water": solver.n_water, "support_radius": solver.re, "status": "running"})
+    else:
+        writer = RunWriter.reopen(out_path, n_frames=saved["n_frames"], n_diagnostics=saved["n_diagnostics"],
+                                  probe_samples=saved["probe_samples"])
+        writer.set_attrs(config_yaml=resolved_yaml(cfg), status="running", exit_reason="",
+                         resumed_from=f"{Path(resume_from).name} (t = {saved['t']:.6g} s)")
     reported = getattr(solver, "diagnostic_names", DIAG_COLUMNS)
     diag = {k: [] for k in DIAG_COLUMNS if k in DRIVER_COLUMNS or k in reported}
     summary = {"out": str(out_path), "arch": be["arch"], "steps": 0, "status": "running"}
-    extras = RunExtras(cfg, writer, out_path, scene.kind, solver.mass, solver.rho_w)
+    extras = RunExtras(cfg, writer, out_path, scene.kind, solver.mass, solver.rho_w,
+                       keep_csv_rows=saved["csv_rows"] if saved is not None else None)
+    checkpoints = Checkpoints(cfg, out_path, solver, writer, extras)
     progress_bar = Progress(cfg.end_time, progress)
     wall0 = _time.perf_counter()
     step_wall = 0.0
+    volume0 = 0.0
     try:
-        first = solver.initial_diagnostics()
-        fields0 = solver.fields_by_id()
-        extras.after_step(0.0, lambda: fields0)
-        extras.after_frame(writer.write_frame(0.0, fields0), 0.0, fields0)
-        summary["compile_and_setup_seconds"] = _time.perf_counter() - t_compile
-        volume0 = first["water_volume"]
         every = cfg.output.every
-        next_out = every
-        t = 0.0
+        if saved is None:
+            first = solver.initial_diagnostics()
+            fields0 = solver.fields_by_id()
+            extras.after_step(0.0, lambda: fields0)
+            extras.after_frame(writer.write_frame(0.0, fields0), 0.0, fields0)
+            volume0 = first["water_volume"]
+            next_out = every
+            t = 0.0
+            last = first
+        else:
+            extras.resume(saved)
+            volume0, next_out, t, last = saved["volume0"], saved["next_out"], saved["t"], saved["last"]
+            checkpoints.next = saved["next_checkpoint"]
+        summary["compile_and_setup_seconds"] = _time.perf_counter() - t_compile
         n_fixed = None if stepper.fixed is None or propose is not None else int(round(cfg.end_time / stepper.fixed))
         speed_bound = solver.max_speed_bound()
-        last = first
+        checkpoints.catch_sigint()
         while True:
             if n_fixed is not None:
                 if solver.step_count >= n_fixed:
@@ -169,6 +190,11 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                 _flush_diag(writer, diag)
                 while next_out <= t + 1e-9 * every:
                     next_out += every
+            if checkpoints.due(t):
+                _flush_diag(writer, diag)
+                checkpoints.write(t, {"t": t, "next_out": next_out, "last": last, "volume0": volume0})
+                if checkpoints.interrupted:
+                    raise KeyboardInterrupt
             progress_bar.update(t, solver.step_count / max(step_wall, 1e-9),
                                 f", CG {last['cg_iterations']}" if "cg_iterations" in last else f", dt {dt:.3g} s")
         summary["status"] = "completed"
@@ -184,6 +210,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
         summary["status"] = "interrupted"
         raise
     finally:
+        checkpoints.release_sigint()
         progress_bar.close()
         _flush_diag(writer, diag)
         extras.before_close()
@@ -264,7 +291,7 @@ class RunExtras:
     and <run>.probes.csv), pictures while it goes (output.images) and, whatever the end, the XDMF
     sidecar of the frames written. None of them can stop the simulation: failures are logged."""
 
-    def __init__(self, cfg, writer, out_path, kind, mass: float, rho_w: float):
+    def __init__(self, cfg, writer, out_path, kind, mass: float, rho_w: float, keep_csv_rows: int | None = None):
         from .io.hdf5 import unit_for
         from .io.probe_csv import probe_csv_path
 
@@ -277,7 +304,8 @@ class RunExtras:
         if cfg.probes:
             from .probes import ProbeRecorder, ProbeSet
 
-            self.recorder = ProbeRecorder(ProbeSet(cfg.probes, cfg.dim, cfg.dx, cfg.output.every), writer, csv_path)
+            self.recorder = ProbeRecorder(ProbeSet(cfg.probes, cfg.dim, cfg.dx, cfg.output.every), writer, csv_path,
+                                          keep_csv_rows=keep_csv_rows)
         elif csv_path.exists():
             csv_path.unlink()  # a stale table of an earlier run with this name
         if cfg.output.images is not None:
@@ -288,6 +316,20 @@ class RunExtras:
             self.spooler = ImageSpooler(cfg.output.images, self.out_path, dim=cfg.dim, dx=cfg.dx, kind=self.kind,
                                         units={}, markers=markers)
             self._unit_for = lambda name: unit_for(name, cfg.dim)
+
+    def probe_state(self) -> dict:
+        """What a checkpoint keeps of the probes: next sampling times and the samples written so far
+        (call after `flush`)."""
+        if self.recorder is None:
+            return {"probe_next": [], "csv_rows": 0, "probe_samples": {}}
+        group = self.recorder.writer.file["probes"]
+        return {"probe_next": list(self.recorder.set._next), "csv_rows": self.recorder.csv.rows,
+                "probe_samples": {name: int(group[name]["time"].shape[0]) for name in group}}
+
+    def resume(self, saved: dict) -> None:
+        """Continue sampling where a checkpoint left off."""
+        if self.recorder is not None and saved["probe_next"]:
+            self.recorder.set._next = [float(v) for v in saved["probe_next"]]
 
     def after_step(self, t: float, fetch):
         """Sample the probes due at t; returns the fetched fields (None when nothing was due)."""
@@ -332,3 +374,74 @@ class RunExtras:
                     log.info("%d picture(s) in %s", self.spooler.count, self.spooler.out_dir)
             except Exception as exc:  # noqa: BLE001
                 log.warning("output.images: %s", exc)
+
+
+class Checkpoints:
+    """Checkpoints of a run (config section `checkpoint`, io/checkpoint.py): due every `every` simulated
+    seconds and whenever SIGINT has asked the run to stop. Each holds the solver's `state()` and the
+    step loop's own state, after the run file has been flushed up to that moment."""
+
+    def __init__(self, cfg, out_path, solver, writer, extras):
+        self.every = cfg.checkpoint.every
+        self.keep = cfg.checkpoint.keep
+        self.next = self.every
+        self.out_path = out_path
+        self.solver, self.writer, self.extras = solver, writer, extras
+        self.interrupted = False
+        self._previous_handler = None
+
+    def catch_sigint(self) -> None:
+        """The first SIGINT asks for a stop after the current step (with a checkpoint); a second one
+        interrupts at once. Only in the main thread (elsewhere signals cannot be caught)."""
+        import signal
+        import threading
+
+        if threading.current_thread() is not threading.main_thread():
+            return
+
+        def ask_stop(signum, frame):
+            self.interrupted = True
+            log.warning("interrupt: stopping after this step with a checkpoint (interrupt again to stop at once)")
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+
+        self._previous_handler = signal.signal(signal.SIGINT, ask_stop)
+
+    def release_sigint(self) -> None:
+        import signal
+
+        if self._previous_handler is not None:
+            signal.signal(signal.SIGINT, self._previous_handler)
+            self._previous_handler = None
+
+    def due(self, t: float) -> bool:
+        return self.interrupted or (self.every is not None and t >= self.next - 1e-9 * self.every)
+
+    def write(self, t: float, loop_state: dict) -> Path:
+        from .io.checkpoint import write_checkpoint
+
+        if self.extras.recorder is not None:
+            self.extras.recorder.flush()
+        if self.every is not None:
+            while self.next <= t + 1e-9 * self.every:
+                self.next += self.every
+        diag = self.writer.file["diagnostics"]
+        driver = dict(loop_state, next_checkpoint=self.next, n_frames=self.writer.n_frames,
+                      n_diagnostics=int(diag["time"].shape[0]) if "time" in diag else 0,
+                      **self.extras.probe_state())
+        path = write_checkpoint(self.out_path, self.solver.step_count, t, self.solver.state(), driver, self.keep)
+        log.info("checkpoint at t = %.6g s (step %d): %s", t, self.solver.step_count, path)
+        return path
+
+
+def _resume_state(solver, checkpoint) -> dict:
+    """Load a checkpoint into the solver; returns the step loop's saved state."""
+    from .errors import InputError
+    from .io.checkpoint import read_checkpoint
+    from .sph.state import StateMismatchError
+
+    state, driver, _ = read_checkpoint(checkpoint)
+    try:
+        solver.load_state(state)
+    except StateMismatchError as exc:
+        raise InputError(f"checkpoint '{checkpoint}' does not fit the config: {exc}") from None
+    return driver

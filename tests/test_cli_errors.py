@@ -157,7 +157,12 @@ CASES = [
     case("unknown-flag", ["--bogus"], ["--bogus"]),
     case("unknown-subcommand", ["frobnicate"], ["frobnicate"]),
     case("run-without-config", ["run"], ["--config"]),
-    case("subcommand-not-available", ["sweep"], ["sweep", "not available"]),
+    case("subcommand-not-available", ["bench"], ["bench", "not available"]),
+    case("sweep-without-config", ["sweep"], ["sweep", "--config"]),
+    case("sweep-bad-param", ["sweep", "--config", "configs/hydrostatic.yaml", "--param", "dx"], ["--param 'dx'"]),
+    case("resume-missing-run-file", ["resume", "{tmp}/nothere.h5"], ["nothere.h5"]),
+    case("metric-unknown-probe", ["--set", "metrics=[{name: m, probe: nowhere}]"], ["metrics[0].probe", "nowhere"]),
+    case("checkpoint-keep-zero", ["--set", "checkpoint.keep=0"], ["checkpoint.keep"]),
     case("info-without-input", ["info"], ["info"]),
     case("info-missing-run-file", ["info", "{tmp}/nothere.h5"], ["nothere.h5"]),
     case("info-not-hdf5", ["info", "{tmp}/fake.h5"], ["fake.h5", "not an HDF5 file"],
@@ -186,7 +191,7 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(run_cli, tmp_path, a
         else:
             (tmp_path / name).write_text(text)
     args = _expand(args, tmp_path)
-    command = args[0] if args and args[0] in ("run", "info", "render", "plot", "sweep") else "run"
+    command = args[0] if args and args[0] in ("run", "info", "render", "plot", "sweep", "resume", "bench") else "run"
     if command == "run" and "--config" not in args and args != ["run"]:
         args = [*args, "--config", HYDROSTATIC]
     if command == "run" and "--out" not in args:

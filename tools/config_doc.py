@@ -31,6 +31,7 @@ SECTIONS = [("Config", "top level"), ("Output", "output"), ("Images", "output.im
             ("TimeStep", "timestep"), ("Neighbours", "neighbours"), ("Guard", "guard")]
 SECTIONS += [("WCSPH", "wcsph"), ("WCSPHWater", "wcsph.water"), ("WCSPHAir", "wcsph.air"),
              ("ArtificialViscosity", "wcsph.artificial_viscosity")]
+SECTIONS += [("Checkpoint", "checkpoint"), ("Metric", "metrics[k]")]
 
 FOOTER = """## Fixed names
 

@@ -49,8 +49,8 @@ def parse_overrides(items) -> list[tuple[str, object]]:
 
 
 def set_dotted(data: dict, key: str, value) -> None:
-    """Set data[a][b][c] = value for key 'a.b.c'; integer parts index lists."""
-    parts = key.split(".")
+    """Set data[a][b][c] = value for key 'a.b.c'; integer parts index lists ('a.0.b' or 'a[0].b')."""
+    parts = re.sub(r"\[(\d+)\]", r".\1", key).split(".")
     node = data
     for n, part in enumerate(parts[:-1]):
         nxt = parts[n + 1]
@@ -158,3 +158,27 @@ def resolved_yaml(cfg: Config) -> str:
     """The fully resolved config (defaults filled in) as YAML text."""
     data = cfg.model_dump(mode="json")
     return yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
+
+
+#: sections of a resolved config that belong to the other mode
+_OTHER_MODE_SECTIONS = {"isph": ("wcsph", "air"), "wcsph_biot": ("isph", "soil")}
+
+
+def load_run_config(run_path, overrides=()) -> Config:
+    """The validated Config stored in a run file (attribute config_yaml), with `key=value` overrides."""
+    from ..io.hdf5 import RunFile, RunFileError
+
+    try:
+        with RunFile(run_path) as rf:
+            raw = yaml.safe_load(rf.config_yaml)
+    except RunFileError as exc:
+        raise InputError(str(exc)) from None
+    except yaml.YAMLError:
+        raw = None
+    if not isinstance(raw, dict):
+        raise InputError(f"{run_path}: the run file holds no readable config")
+    # the stored config is fully resolved: it holds the other mode's sections at their defaults, which a
+    # config may not set explicitly
+    for key in _OTHER_MODE_SECTIONS.get(raw.get("mode"), ()):
+        raw.pop(key, None)
+    return load_config(data=raw, overrides=overrides)

@@ -442,6 +442,42 @@ class Guard(Strict):
     out_of_domain: Literal["remove", "error"] = "remove"
 
 
+class Checkpoint(Strict):
+    """Restart points: the full solver state written to <run>.checkpoints/ beside the run file, read by
+    `taichi-sph resume RUN.h5`. An interrupted run (Ctrl-C, SIGINT) always writes one before it stops."""
+
+    #: simulated seconds between checkpoints; none: only when the run is interrupted
+    every: PosFloat | None = None
+    #: how many of the newest checkpoints are kept (older ones are deleted)
+    keep: PosInt = 2
+
+
+#: per-step diagnostics a metric can read (run file /diagnostics/<name>)
+MetricDiagnostic = Literal["kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual", "dt",
+                           "wall_seconds", "free_surface", "collisions"]
+
+
+class Metric(Strict):
+    """A number computed from a finished run (a probe or a diagnostic reduced over time), one column of
+    the table `taichi-sph sweep` gathers. See docs/sweep.md."""
+
+    #: column name in the sweep table (letters, digits and '_')
+    name: ProbeName
+    #: the time series it reads: a probe's name (probes[k].name) ...
+    probe: str | None = None
+    #: ... or a per-step diagnostic
+    diagnostic: MetricDiagnostic | None = None
+    #: for a velocity probe: component index (0 = x); default the speed (magnitude)
+    component: Annotated[int, Field(ge=0, le=2)] | None = None
+    #: final: last value; max, min; mean: time average (trapezoid); at: value at `time` (linear
+    #: interpolation); first_above / first_below: first time (s) the series crosses `level` (interpolated)
+    stat: Literal["final", "max", "min", "mean", "at", "first_above", "first_below"] = "final"
+    #: for stat at: a time (s) or the name of an earlier metric whose value is a time
+    time: NonNegFloat | str | None = None
+    #: for stat first_above / first_below: the level, in the series' unit
+    level: float | None = None
+
+
 class Config(Strict):
     #: solver: isph (incompressible, PPE) or wcsph_biot (weakly compressible mixture)
     mode: Literal["isph", "wcsph_biot"] = "isph"
@@ -495,6 +531,10 @@ class Config(Strict):
     guard: Guard = Guard()
     #: named sets of dotted overrides applied by `--variant NAME`
     variants: dict[str, dict[str, object]] = {}
+    #: checkpoints for `taichi-sph resume`
+    checkpoint: Checkpoint = Checkpoint()
+    #: numbers computed from the finished run, gathered by `taichi-sph sweep` (one column each)
+    metrics: list[Metric] = []
 
     # ---- derived values -------------------------------------------------------------------
     def gravity_vector(self) -> list[float]:
@@ -559,6 +599,7 @@ def check(cfg: "Config") -> None:
         _fail("soil.marker_spacing", f"must be at most 2 dx = {2 * cfg.dx} (markers must resolve the kernel)")
     _check_probes(cfg)
     _check_images(cfg)
+    _check_metrics(cfg)
     if cfg.tank.periodic:
         _fail("tank.periodic", "periodic boundaries are not implemented yet; use slip walls")
     if min(cfg.tank.size) < 2 * cfg.dx:
@@ -700,3 +741,34 @@ def _check_soil_blocks(cfg: "Config") -> None:
     if soil.tension_cutoff is not None and soil.tan_phi > 0 and soil.tension_cutoff > soil.cohesion / soil.tan_phi:
         _fail("wcsph.soil.tension_cutoff", f"must not exceed cohesion / tan_phi = {soil.cohesion / soil.tan_phi:g} Pa "
               "(beyond it the failure shear stress would be negative)")
+
+
+def _check_metrics(cfg: "Config") -> None:
+    """A metric reads exactly one series that exists, has the keys its stat needs, names are unique."""
+    probes = {p.name: p for p in cfg.probes}
+    seen: list[str] = []
+    for k, m in enumerate(cfg.metrics):
+        key = f"metrics[{k}]"
+        if m.name in seen:
+            _fail(f"{key}.name", f"duplicate metric name '{m.name}'")
+        if (m.probe is None) == (m.diagnostic is None):
+            _fail(key, "give exactly one of `probe` and `diagnostic`")
+        if m.probe is not None and m.probe not in probes:
+            _fail(f"{key}.probe", f"no probe named '{m.probe}' (probes: {', '.join(probes) or 'none'})")
+        if m.component is not None and (m.probe is None or probes[m.probe].type != "velocity"):
+            _fail(f"{key}.component", "applies to a velocity probe only")
+        if m.component is not None and m.component >= cfg.dim:
+            _fail(f"{key}.component", f"must be below dim = {cfg.dim}")
+        if m.stat == "at":
+            if m.time is None:
+                _fail(f"{key}.time", "required for stat at")
+            if isinstance(m.time, str) and m.time not in seen:
+                _fail(f"{key}.time", f"'{m.time}' is neither a number nor the name of an earlier metric")
+        elif m.time is not None:
+            _fail(f"{key}.time", f"applies to stat at only (stat is {m.stat})")
+        if m.stat in ("first_above", "first_below"):
+            if m.level is None:
+                _fail(f"{key}.level", f"required for stat {m.stat}")
+        elif m.level is not None:
+            _fail(f"{key}.level", f"applies to stats first_above and first_below only (stat is {m.stat})")
+        seen.append(m.name)

@@ -350,6 +350,49 @@ class RunWriter:
             self._file = None
             raise
 
+    @classmethod
+    def reopen(cls, path: str | Path, *, n_frames: int, n_diagnostics: int, probe_samples: Mapping[str, int],
+               units: Mapping[str, str] | None = None, compression: str | None = None) -> "RunWriter":
+        """Open an existing run file to continue it (resume from a checkpoint). What was written after
+        the checkpoint is cut away first: frames past `n_frames`, diagnostic rows past `n_diagnostics`,
+        probe samples past ``probe_samples[name]`` (probes not named there are removed)."""
+        self = cls.__new__(cls)
+        self.path = Path(path)
+        f = h5py.File(self.path, "r+", libver=_LIBVER)
+        self._file = f
+        try:
+            self.dim = int(f.attrs["dim"])
+            self.n_particles = int(f["particles/kind"].shape[0])
+            self.units = dict(units or {})
+            self.compression = compression
+            frames = f.require_group("frames")
+            names = tuple(k for k in frames.keys() if k != "time")
+            for name in (*names, "time"):
+                if name in frames and frames[name].shape[0] > n_frames:
+                    frames[name].resize(n_frames, axis=0)
+            self._frame_names = names or None
+            self._n_frames = int(n_frames) if names else 0
+            diag = f.require_group("diagnostics")
+            for name in diag.keys():
+                if diag[name].shape[0] > n_diagnostics:
+                    diag[name].resize(n_diagnostics, axis=0)
+            self._diag_names = tuple(diag.keys()) or None
+            probes = f.require_group("probes")
+            for name in list(probes.keys()):
+                keep = probe_samples.get(name)
+                if keep is None:
+                    del probes[name]
+                    continue
+                for part in ("time", "value"):
+                    if probes[name][part].shape[0] > keep:
+                        probes[name][part].resize(keep, axis=0)
+            f.flush()
+        except BaseException:
+            f.close()
+            self._file = None
+            raise
+        return self
+
     # -- context manager ----------------------------------------------------------------------
     def __enter__(self) -> "RunWriter":
         return self

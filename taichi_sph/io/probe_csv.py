@@ -23,12 +23,20 @@ def probe_csv_path(h5_path: str | Path) -> Path:
 
 
 class ProbeCSVWriter:
-    def __init__(self, path: str | Path, columns: Sequence[str]):
+    """Writes the table; with `keep_rows` (a resumed run) the first `keep_rows` rows of the existing
+    file are kept and the rest is cut away. `rows` counts the rows the file holds."""
+
+    def __init__(self, path: str | Path, columns: Sequence[str], keep_rows: int | None = None):
         self.path = Path(path)
         self.columns = list(columns)
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        kept: list[str] = []
+        if keep_rows is not None and self.path.is_file():
+            kept = self.path.read_text(encoding="ascii").splitlines(keepends=True)[1 : 1 + int(keep_rows)]
         self._f = open(self.path, "w", encoding="ascii", newline="")  # noqa: SIM115  (closed by close())
         self._f.write(",".join(["time", *self.columns]) + "\n")
+        self._f.writelines(kept)
+        self.rows = len(kept)
         self._f.flush()
 
     def append(self, time: float, values: Mapping[str, float]) -> None:
@@ -38,6 +46,7 @@ class ProbeCSVWriter:
             raise ValueError(f"{self.path}: unknown probe column {min(unknown)!r}")
         cells = [repr(float(time))] + [repr(float(values[c])) if c in values else "" for c in self.columns]
         self._f.write(",".join(cells) + "\n")
+        self.rows += 1
 
     def flush(self) -> None:
         if not self._f.closed:

@@ -774,6 +774,24 @@ class ISPHSolver:
         height = float(self.cfg.tank.size[-1])
         return 20.0 * math.sqrt(self.g_abs * height) if self.g_abs > 0 else 100.0
 
+    # ------------------------------------------------------------------ checkpoints
+    #: fields that carry over from one step to the next (all else is recomputed by each step); the
+    #: pressure is the PPE's warm start. Per-particle state added later belongs in this tuple.
+    state_fields = ("x", "v", "normal", "p", "eps", "kind", "ids", "active", "rho_n", "d50", "rest_fill")
+    state_scalars = ("step_count", "time", "removed_total")
+
+    def state(self) -> dict:
+        """Full state for a checkpoint, {name: numpy array or scalar} (sph/state.py)."""
+        from ..sph.state import snapshot
+
+        return snapshot(self, self.state_fields, self.state_scalars)
+
+    def load_state(self, state: dict) -> None:
+        """Continue from a `state()` of a solver built from the same config."""
+        from ..sph.state import restore
+
+        restore(self, state, self.state_fields, self.state_scalars)
+
 
 def _spline(q: float) -> float:
     return float(kernels.w_np(q * 1.0, 1.0, 1) / kernels.sigma(1, 1.0))

@@ -677,6 +677,28 @@ class WCSPHSolver(SoilStep):
         height = float(self.cfg.tank.size[-1])
         return 20.0 * math.sqrt(self.g_abs * height) if self.g_abs > 0 else 100.0
 
+    # ------------------------------------------------------------------ checkpoints
+    #: fields that carry over from one step to the next: leap-frog state, the packed views, positions at
+    #: the last list build; with the Verlet neighbour lists themselves (kept between rebuilds); the soil's
+    #: effective stress, plastic strain, pore pressure, water presence and drag (soil_step.py; one-element
+    #: fields in a scene without soil).
+    state_fields = ("x", "v", "a", "xs", "normal", "x0", "rho", "p", "h", "m", "wdepth", "kind", "ids", "active",
+                    "fmask", "s", "q", "sig", "eps_p", "pore", "phi_w", "adrag")
+    state_scalars = ("step_count", "time", "removed_total", "dt_prev", "r_list", "hmax", "rebuilds", "red",
+                     "red_s")
+
+    def state(self) -> dict:
+        """Full state for a checkpoint, {name: numpy array or scalar} (sph/state.py)."""
+        from ..sph.state import snapshot
+
+        return snapshot(self, self.state_fields, self.state_scalars, self.grid)
+
+    def load_state(self, state: dict) -> None:
+        """Continue from a `state()` of a solver built from the same config."""
+        from ..sph.state import restore
+
+        restore(self, state, self.state_fields, self.state_scalars, self.grid)
+
 
 def _exponent(gamma: float):
     """An integral exponent as int, so that the EOS compiles (rho / rho0)^7 to multiplications."""
