@@ -170,7 +170,7 @@ def run_case(spec: dict) -> dict:
             break
     wall = time.perf_counter() - t0
     cpu = time.process_time() - cpu0
-    n_water = getattr(solver, "n_water", None) or getattr(solver, "n_fluid")
+    n_water = getattr(solver, "n_water", None) or solver.n_fluid
     per_step = wall / steps
     return {
         **{k: spec[k] for k in ("mode", "dim", "size", "arch")}, "precision": be["precision"],
@@ -199,11 +199,11 @@ def spawn(spec: dict, cache: Path) -> dict:
 # ---------------------------------------------------------------------------------------- report
 def markdown(results, info) -> str:
     lines = [
-        f"Machine: {info['machine']}; Taichi {info['taichi']}, {info['threads']} CPU threads, load average "
-        f"{info['load']:.1f} at start. Produced by `python tools/bench.py {info['args']}` on {info['date']}.",
+        (f"Machine: {info['machine']}; Taichi {info['taichi']}, {info['threads']} CPU threads, load average "
+         f"{info['load']:.1f} at start. Produced by `python tools/bench.py {info['args']}` on {info['date']}."),
         "",
-        "| mode | dim | size | arch | precision | dx | water particles | M particle-steps/s | ms/step | CG iters "
-        "| CPU s / wall s | JIT s (cold / warm) | peak memory MB | ms per phase |",
+        ("| mode | dim | size | arch | precision | dx | water particles | M particle-steps/s | ms/step | CG iters "
+         "| CPU s / wall s | JIT s (cold / warm) | peak memory MB | ms per phase |"),
         "|---|---|---|---|---|---|---:|---:|---:|---:|---:|---|---:|---|",
     ]
     for r in results:
