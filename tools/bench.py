@@ -207,7 +207,8 @@ def markdown(results, info) -> str:
         "|---|---|---|---|---|---|---:|---:|---:|---:|---:|---|---:|---|",
     ]
     for r in results:
-        head = f"| {r['mode']} | {r['dim']}D | {r['size']} | {r['arch']} "
+        label = r["mode"] + (f" ({r['ppe']})" if r.get("ppe") else "")
+        head = f"| {label} | {r['dim']}D | {r['size']} | {r['arch']} "
         if "error" in r:
             lines.append(head + f"| | | | | | | | | | not run: {r['error']} |")
             continue
@@ -241,6 +242,8 @@ def main(argv=None) -> int:
     ap.add_argument("--dims", nargs="+", type=int, default=[2, 3], choices=[2, 3])
     ap.add_argument("--sizes", nargs="+", default=list(SIZES), choices=list(SIZES))
     ap.add_argument("--arch", nargs="+", default=["cpu"], choices=["cpu", "cuda"])
+    ap.add_argument("--ppe", nargs="+", default=[None], choices=["sparse_cg", "ell_pcg"],
+                    help="isph PPE solver types to run, each case with each in turn (default: the config's)")
     ap.add_argument("--min-time", type=float, default=10.0, help="seconds of timed steps per case")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                     help="config override for every case, e.g. isph.ppe.type=sparse_cg")
@@ -267,20 +270,23 @@ def main(argv=None) -> int:
                     if MODES[mode] is None:
                         results.append({**spec, "error": "mode not implemented yet"})
                         continue
-                    jit = None
-                    if size == sizes[0]:
-                        # one step with an empty offline cache (cold JIT), then again with it filled (warm)
-                        one = {**spec, "min_time": 0.0, "max_steps": 1, "warmup": 0}
-                        with tempfile.TemporaryDirectory() as tmp:
-                            jit = [spawn(one, Path(tmp)) for _ in range(2)]
-                    r = spawn(spec, cache)
-                    if jit is not None and not any("error" in j for j in (*jit, r)):
-                        r["jit_cold_seconds"] = jit[0]["jit_seconds"]
-                        r["jit_seconds"] = jit[1]["jit_seconds"]
-                    results.append(r)
-                    msg = r.get("error") or (f"{r['water_particles']} particles, {r['mipps']:.3f} M particle-steps/s, "
-                                             f"{1e3 * r['seconds_per_step']:.1f} ms/step")
-                    print(f"{mode} {dim}D {size} {arch}: {msg}", flush=True)
+                    ppes = args.ppe if mode.startswith("isph") else [None]
+                    for ppe in ppes:  # back to back, so that load from elsewhere hits them alike
+                        pspec = spec if ppe is None else {**spec, "set": {**overrides, "isph.ppe.type": ppe}}
+                        jit = None
+                        if size == sizes[0]:
+                            # one step with an empty offline cache (cold JIT), then again with it filled (warm)
+                            one = {**pspec, "min_time": 0.0, "max_steps": 1, "warmup": 0}
+                            with tempfile.TemporaryDirectory() as tmp:
+                                jit = [spawn(one, Path(tmp)) for _ in range(2)]
+                        r = spawn(pspec, cache)
+                        if jit is not None and not any("error" in j for j in (*jit, r)):
+                            r["jit_cold_seconds"] = jit[0]["jit_seconds"]
+                            r["jit_seconds"] = jit[1]["jit_seconds"]
+                        results.append(r)
+                        msg = r.get("error") or (f"{r['water_particles']} particles, {r['mipps']:.3f} M particle-steps/s, "
+                                                 f"{1e3 * r['seconds_per_step']:.1f} ms/step")
+                        print(f"{mode} {ppe or ''} {dim}D {size} {arch}: {msg}", flush=True)
     import taichi as ti
 
     info = {"machine": machine(), "taichi": ".".join(map(str, ti.__version__)),
