@@ -50,8 +50,9 @@ def run_pysph(python: str, dx: float, steps: int) -> dict:
         r = subprocess.run([python, str(script), str(dx), str(steps), str(out), str(Path(tmp) / "out")],
                            capture_output=True, text=True, env=env, check=False)
         if r.returncode != 0 or not out.exists():
-            lines = (r.stderr or r.stdout).strip().splitlines()
-            return {"error": lines[-1] if lines else f"exit {r.returncode}"}
+            lines = (r.stderr + r.stdout).strip().splitlines()
+            errors = [line for line in lines if "Error" in line] or lines or [""]
+            return {"error": f"exit {r.returncode}: {errors[-1]}"}
         return json.loads(out.read_text())
 
 
