@@ -441,10 +441,10 @@ class ISPHSolver:
                         stab /= self.drag[i]
                     source = div + stab
                     self._ppe_add(A, ri, ri, diag)
-                    self.b[ri] = rhs - source
+                    self.b[ri] = ti.cast(rhs - source, self.b.dtype)
                 else:
                     self._ppe_add(A, ri, ri, dirichlet_diag)
-                    self.b[ri] = dirichlet_diag * self._dirichlet_value(i)
+                    self.b[ri] = ti.cast(dirichlet_diag * self._dirichlet_value(i), self.b.dtype)
 
     @ti.func
     def _dirichlet_value(self, i):
@@ -463,7 +463,7 @@ class ISPHSolver:
     def _k_gather_pressure(self):
         for i in range(self.n):
             if self.kind[i] == WATER:
-                self.psol[self.row[i]] = self.p[i]
+                self.psol[self.row[i]] = ti.cast(self.p[i], self.psol.dtype)
 
     @ti.kernel
     def _k_wall_pressure(self):
