@@ -18,7 +18,7 @@ def _small_dambreak_config():
     return load_config(data={
         "mode": "isph", "dim": 2, "dx": 0.01, "end_time": 0.1, "dt": 0.002,
         "tank": {"size": [0.3, 0.2]}, "water": [{"min": [0, 0], "max": [0.1, 0.15]}],
-        "isph": {"ppe": {"tolerance": 1e-10, "max_iterations": 5000}},
+        "isph": {"ppe": {"type": "sparse_cg", "tolerance": 1e-10, "max_iterations": 5000}},
     })
 
 

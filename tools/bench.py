@@ -1,32 +1,42 @@
-"""Throughput benchmark: particle-steps per second and time per phase for mode isph.
+"""Throughput benchmark matrix: mode x dimension x size x arch.
 
-Runs the hydrostatic tank (2D and 3D, two sizes each) in one process, times a fixed number of steps
-after a warm-up (JIT compilation excluded, reported separately), and writes docs/performance.json
-and the table in docs/performance.md with the machine named.
+Modes: isph_free (hydrostatic tank at rest), isph_porous (the seed's free fall into a porous layer,
+configs/freefall.yaml geometry, Smagorinsky on), wcsph (the dam break of configs/dambreak_wcsph.yaml,
+tank 4 x 3 m, column 1 x 2 m; in 3D 0.2 m wide), wcsph_soil (a hook: listed, skipped until that
+mode exists). Sizes S, M, L are about 10k, 50k and 200k water particles (dx chosen from the water
+volume). Each case runs in its own process (one Taichi runtime per process), which gives:
 
-    python tools/bench.py [--steps 20] [--arch cpu] [--out docs/performance.md]
+- particle-steps per second (water particles x steps / wall seconds; MIPPS = millions of them),
+- time per phase (the solver's own timers) and PPE CG iterations per step (isph),
+- JIT time: setup and the first step less one steady step. For the smallest size of each mode and
+  dimension one step runs with an empty Taichi offline cache (cold JIT) and again with it filled
+  (warm JIT); the timed runs use the project cache directory `.cache/bench` (field sizes are
+  compile-time constants, so each size has its own cache entries),
+- peak memory: the largest resident set of the process (ru_maxrss).
+
+Writes docs/performance.json and the generated table into docs/performance.md between the markers
+`<!-- bench:begin -->` and `<!-- bench:end -->` (the rest of that file is kept), machine named.
+
+    python tools/bench.py --quick             # size S, 2D and 3D, every mode (a few minutes on 2 cores)
+    python tools/bench.py [--modes ...] [--dims 2 3] [--sizes S M L] [--arch cpu cuda] [--min-time 10]
 """
-
-from __future__ import annotations
 
 import argparse
 import json
 import os
 import platform
+import resource
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-CASES = [
-    # name, dim, dx, tank size, water box max
-    ("hydrostatic 2D", 2, 0.01, [0.40, 0.40], [0.40, 0.30]),
-    ("hydrostatic 2D", 2, 0.0025, [0.40, 0.40], [0.40, 0.30]),
-    ("hydrostatic 3D", 3, 0.02, [0.40, 0.20, 0.40], [0.40, 0.20, 0.30]),
-    ("hydrostatic 3D", 3, 0.01, [0.40, 0.20, 0.40], [0.40, 0.20, 0.30]),
-]
+SIZES = {"S": 10_000, "M": 50_000, "L": 200_000}
+BEGIN, END = "<!-- bench:begin -->", "<!-- bench:end -->"
 
 
 def machine() -> str:
@@ -41,98 +51,251 @@ def machine() -> str:
     return f"{cpu}, {os.cpu_count()} logical cores, {platform.system()} {platform.release()}"
 
 
-def bench_case(name, dim, dx, size, wmax, steps, warmup):
+# ---------------------------------------------------------------------------------------- cases
+def _box(lo, hi):
+    return {"min": list(lo), "max": list(hi)}
+
+
+def _dx_for(volume: float, dim: int, target: int) -> float:
+    return round((volume / target) ** (1.0 / dim), 6)
+
+
+def isph_free(dim: int, target: int) -> dict:
+    """Hydrostatic tank at rest (water 0.4 x 0.3 m in 2D, 0.4 x 0.2 x 0.3 m in 3D), dt 1 ms."""
+    if dim == 2:
+        size, water = [0.4, 0.4], _box([0, 0], [0.4, 0.3])
+    else:
+        size, water = [0.4, 0.2, 0.4], _box([0, 0, 0], [0.4, 0.2, 0.3])
+    vol = 0.12 if dim == 2 else 0.024
+    return {"mode": "isph", "dim": dim, "dx": _dx_for(vol, dim, target), "end_time": 1.0, "dt": 0.001,
+            "tank": {"size": size}, "water": [water]}
+
+
+def isph_porous(dim: int, target: int) -> dict:
+    """configs/freefall.yaml: water 0.2 m (square or cube) falling onto a porous layer, eps0 0.3."""
+    from taichi_sph.config.load import read_yaml
+
+    data = read_yaml(ROOT / "configs" / "freefall.yaml")
+    data.pop("variants", None)
+    data.pop("output", None)
+    data["dt"] = 0.001
+    if dim == 2:
+        data["dim"] = 2
+        data["tank"]["size"] = [0.20, 0.70]
+        data["water"] = [_box([0.0, 0.40], [0.20, 0.60])]
+        data["soil"]["regions"][0].update(_box([0.0, 0.20], [0.20, 0.40]))
+    vol = 0.2**dim
+    data["dx"] = _dx_for(vol, dim, target)
+    return data
+
+
+def wcsph(dim: int, target: int) -> dict:
+    """configs/dambreak_wcsph.yaml (column 1 x 2 m; 3D: 0.2 m wide), adaptive step of eq 49."""
+    from taichi_sph.config.load import read_yaml
+
+    data = read_yaml(ROOT / "configs" / "dambreak_wcsph.yaml")
+    data.pop("variants", None)
+    data.pop("output", None)
+    if dim == 3:
+        data["dim"] = 3
+        data["tank"]["size"] = [4.0, 0.2, 3.0]
+        data["water"] = [_box([0, 0, 0], [1.0, 0.2, 2.0])]
+    vol = 2.0 if dim == 2 else 0.4
+    data["dx"] = _dx_for(vol, dim, target)
+    return data
+
+
+MODES = {
+    "isph_free": isph_free,
+    "isph_porous": isph_porous,
+    "wcsph": wcsph,
+    # hook: soil-water coupling of mode wcsph_biot, added here once that mode runs
+    "wcsph_soil": None,
+}
+
+
+# ---------------------------------------------------------------------------------------- one case (child)
+def _solver_for(cfg, scene):
+    if cfg.mode == "isph":
+        from taichi_sph.isph.solver import ISPHSolver
+
+        return ISPHSolver(cfg, scene)
+    from taichi_sph.wcsph.solver import WCSPHSolver
+
+    return WCSPHSolver(cfg, scene)
+
+
+def run_case(spec: dict) -> dict:
+    """Build the scene and solver, time the first step (JIT) and then steps for `min_time` seconds."""
+    from taichi_sph import backend
     from taichi_sph.config import load_config
-    from taichi_sph.isph.solver import ISPHSolver
     from taichi_sph.scene import build_scene
 
-    cfg = load_config(data={"mode": "isph", "dim": dim, "dx": dx, "end_time": 1.0, "dt": 0.001,
-                            "tank": {"size": size}, "water": [{"min": [0.0] * dim, "max": wmax}]})
+    be = backend.init(spec["arch"], spec.get("precision", "auto"))
+    data = MODES[spec["mode"]](spec["dim"], spec["target"])
+    for key, value in spec.get("set", {}).items():
+        from taichi_sph.config.load import set_dotted
+
+        set_dotted(data, key, value)
+    cfg = load_config(data=data)
     scene = build_scene(cfg)
     t0 = time.perf_counter()
-    solver = ISPHSolver(cfg, scene)
-    for _ in range(warmup):
-        solver.step(0.001)
+    solver = _solver_for(cfg, scene)
+    solver.initial_diagnostics()
+    stepper = None
+    if cfg.mode != "isph":
+        from taichi_sph.run import TimeStepper
+
+        stepper = TimeStepper(cfg, solver.g_abs)
+
+    def step():
+        dt = cfg.dt if stepper is None else stepper.choose(0.0, solver.propose_dt())[0]
+        return solver.step(dt)
+
+    step()
     first = time.perf_counter() - t0
+    for _ in range(spec.get("warmup", 2)):
+        step()
     for k in solver.timers:
         solver.timers[k] = 0.0
     iters = []
+    steps = 0
     t0 = time.perf_counter()
-    for _ in range(steps):
-        iters.append(solver.step(0.001)["cg_iterations"])
+    cpu0 = time.process_time()
+    while steps < spec.get("max_steps", 1000):
+        last = step()
+        iters.append(last.get("cg_iterations", 0))
+        steps += 1
+        if time.perf_counter() - t0 >= spec.get("min_time", 10.0) and steps >= 3:
+            break
     wall = time.perf_counter() - t0
-    phases = {k: v / steps for k, v in solver.timers.items()}
+    cpu = time.process_time() - cpu0
+    n_water = getattr(solver, "n_water", None) or solver.n_fluid
+    per_step = wall / steps
     return {
-        "case": name, "dim": dim, "dx": dx, "water_particles": solver.n_water, "all_particles": solver.n,
-        "steps": steps, "seconds_per_step": wall / steps,
-        "particle_steps_per_second": solver.n_water * steps / wall,
-        "mipps": solver.n_water * steps / wall / 1e6,
-        "cg_iterations_mean": sum(iters) / len(iters),
-        "phase_seconds_per_step": phases,
-        "setup_and_warmup_seconds": first,
+        **{k: spec[k] for k in ("mode", "dim", "size", "arch")}, "precision": be["precision"],
+        "arch_used": be["arch"], "dx": cfg.dx, "water_particles": int(n_water), "all_particles": int(solver.n),
+        "ppe": cfg.isph.ppe.type if cfg.mode == "isph" else None,
+        "steps": steps, "seconds_per_step": per_step, "particle_steps_per_second": n_water / per_step,
+        "mipps": n_water / per_step / 1e6, "cpu_over_wall": cpu / wall,
+        "cg_iterations_mean": sum(iters) / len(iters) if cfg.mode == "isph" else None,
+        "phase_seconds_per_step": {k: v / steps for k, v in solver.timers.items()},
+        "jit_seconds": max(first - per_step, 0.0),
+        "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
     }
 
 
+def spawn(spec: dict, cache: Path) -> dict:
+    env = dict(os.environ, TAICHI_SPH_CACHE=str(cache), TI_LOG_LEVEL="error")
+    with tempfile.NamedTemporaryFile(suffix=".json") as f:
+        cmd = [sys.executable, __file__, "--child", json.dumps(spec), "--child-out", f.name]
+        r = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
+        if r.returncode != 0:
+            tail = (r.stderr or r.stdout).strip().splitlines()[-1:] or ["?"]
+            return {**spec, "error": f"exit {r.returncode}: {tail[0]}"}
+        return json.loads(Path(f.name).read_text())
+
+
+# ---------------------------------------------------------------------------------------- report
 def markdown(results, info) -> str:
-    phases = ["neighbours", "density", "predictor", "ppe_assembly", "ppe_solve", "corrector", "diagnostics"]
     lines = [
-        "# Performance",
+        (f"Machine: {info['machine']}; Taichi {info['taichi']}, {info['threads']} CPU threads, load average "
+         f"{info['load']:.1f} at start. Produced by `python tools/bench.py {info['args']}` on {info['date']}."),
         "",
-        f"Machine: {info['machine']}; Taichi {info['taichi']}, arch {info['arch']}, {info['precision']}, "
-        f"{info['threads']} threads. Produced by `python tools/bench.py` on {info['date']}.",
-        "",
-        "Mode isph, hydrostatic tank at rest, fixed dt = 1 ms, PPE by SparseMatrixBuilder + SparseCG to a",
-        "relative residual of 1e-8, warm-started from the last pressure. Particle-steps per second count",
-        "water particles. Times per step in milliseconds; JIT compilation excluded (first column of setup).",
-        "",
-        "| case | water particles | M particle-steps/s | ms/step | CG iters | "
-        + " | ".join(phases) + " | setup+warm-up s |",
-        "|---|---|---|---|---|" + "---|" * len(phases) + "---|",
+        ("| mode | dim | size | arch | precision | dx | water particles | M particle-steps/s | ms/step | CG iters "
+         "| CPU s / wall s | JIT s (cold / warm) | peak memory MB | ms per phase |"),
+        "|---|---|---|---|---|---|---:|---:|---:|---:|---:|---|---:|---|",
     ]
     for r in results:
-        ph = " | ".join(f"{1e3 * r['phase_seconds_per_step'][p]:.1f}" for p in phases)
-        lines.append(f"| {r['case']}, dx {r['dx']:g} | {r['water_particles']} | {r['mipps']:.3f} | "
-                     f"{1e3 * r['seconds_per_step']:.1f} | {r['cg_iterations_mean']:.0f} | {ph} | "
-                     f"{r['setup_and_warmup_seconds']:.1f} |")
-    lines += ["", "Phase shares of the step time, largest case of each dimension:", ""]
-    for dim in (2, 3):
-        rs = [r for r in results if r["dim"] == dim]
-        if not rs:
+        label = r["mode"] + (f" ({r['ppe']})" if r.get("ppe") else "")
+        head = f"| {label} | {r['dim']}D | {r['size']} | {r['arch']} "
+        if "error" in r:
+            lines.append(head + f"| | | | | | | | | | not run: {r['error']} |")
             continue
-        r = max(rs, key=lambda r: r["water_particles"])
-        tot = sum(r["phase_seconds_per_step"].values())
-        share = ", ".join(f"{p} {100 * r['phase_seconds_per_step'][p] / tot:.0f} %" for p in phases)
-        lines.append(f"- {dim}D, {r['water_particles']} particles: {share}.")
-    return "\n".join(lines) + "\n"
+        jit = f"{r['jit_seconds']:.1f}"
+        if "jit_cold_seconds" in r:
+            jit = f"{r['jit_cold_seconds']:.1f} / {r['jit_seconds']:.1f}"
+        cg = "" if r["cg_iterations_mean"] is None else f"{r['cg_iterations_mean']:.0f}"
+        ph = ", ".join(f"{k} {1e3 * v:.1f}" for k, v in r["phase_seconds_per_step"].items() if v > 0)
+        lines.append(head + f"| {r['precision']} | {r['dx']:g} | {r['water_particles']} | {r['mipps']:.3f} | "
+                     f"{1e3 * r['seconds_per_step']:.1f} | {cg} | {r['cpu_over_wall']:.2f} | {jit} | "
+                     f"{r['peak_memory_mb']:.0f} | {ph} |")
+    return "\n".join(lines)
 
 
-def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--steps", type=int, default=20)
-    ap.add_argument("--warmup", type=int, default=3)
-    ap.add_argument("--arch", default="cpu")
-    ap.add_argument("--out", default=str(ROOT / "docs" / "performance.md"))
-    args = ap.parse_args()
-    from taichi_sph import backend
-
-    be = backend.init(args.arch, "auto")
-    import taichi as ti
-
-    results = []
-    for case in CASES:
-        r = bench_case(*case, steps=args.steps, warmup=args.warmup)
-        print(f"{r['case']}, dx {r['dx']:g}: {r['water_particles']} particles, {r['mipps']:.3f} M particle-steps/s, "
-              f"{1e3 * r['seconds_per_step']:.1f} ms/step, CG {r['cg_iterations_mean']:.0f}", flush=True)
-        results.append(r)
-    info = {"machine": machine(), "taichi": ".".join(map(str, ti.__version__)), "arch": be["arch"],
-            "precision": be["precision"], "threads": os.environ.get("TI_CPU_MAX_NUM_THREADS", os.cpu_count()),
-            "date": time.strftime("%Y-%m-%d")}
-    out = Path(args.out)
+def write_report(out: Path, results, info) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(json.dumps({"info": info, "results": results}, indent=2))
-    out.write_text(markdown(results, info))
-    print(f"wrote {out}")
+    block = f"{BEGIN}\n{markdown(results, info)}\n{END}"
+    text = out.read_text() if out.exists() else "# Performance\n\n"
+    if BEGIN in text and END in text:
+        text = text[: text.index(BEGIN)] + block + text[text.index(END) + len(END):]
+    else:
+        text = text.rstrip("\n") + "\n\n" + block + "\n"
+    out.write_text(text)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="size S only")
+    ap.add_argument("--modes", nargs="+", default=list(MODES), choices=list(MODES))
+    ap.add_argument("--dims", nargs="+", type=int, default=[2, 3], choices=[2, 3])
+    ap.add_argument("--sizes", nargs="+", default=list(SIZES), choices=list(SIZES))
+    ap.add_argument("--arch", nargs="+", default=["cpu"], choices=["cpu", "cuda"])
+    ap.add_argument("--ppe", nargs="+", default=[None], choices=["sparse_cg", "ell_pcg"],
+                    help="isph PPE solver types to run, each case with each in turn (default: the config's)")
+    ap.add_argument("--min-time", type=float, default=10.0, help="seconds of timed steps per case")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="config override for every case, e.g. isph.ppe.type=sparse_cg")
+    ap.add_argument("--out", default=str(ROOT / "docs" / "performance.md"))
+    ap.add_argument("--child", help=argparse.SUPPRESS)
+    ap.add_argument("--child-out", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.child:
+        Path(args.child_out).write_text(json.dumps(run_case(json.loads(args.child))))
+        return 0
+    from taichi_sph.config.load import parse_overrides
+
+    overrides = dict(parse_overrides(args.overrides))
+    sizes = ["S"] if args.quick else args.sizes
+    cache = ROOT / ".cache" / "bench"
+    load = os.getloadavg()[0]
+    results = []
+    for arch in args.arch:
+        for mode in args.modes:
+            for dim in args.dims:
+                for size in sizes:
+                    spec = {"mode": mode, "dim": dim, "size": size, "arch": arch, "target": SIZES[size],
+                            "min_time": args.min_time, "set": overrides}
+                    if MODES[mode] is None:
+                        results.append({**spec, "error": "mode not implemented yet"})
+                        continue
+                    ppes = args.ppe if mode.startswith("isph") else [None]
+                    for ppe in ppes:  # back to back, so that load from elsewhere hits them alike
+                        pspec = spec if ppe is None else {**spec, "set": {**overrides, "isph.ppe.type": ppe}}
+                        jit = None
+                        if size == sizes[0]:
+                            # one step with an empty offline cache (cold JIT), then again with it filled (warm)
+                            one = {**pspec, "min_time": 0.0, "max_steps": 1, "warmup": 0}
+                            with tempfile.TemporaryDirectory() as tmp:
+                                jit = [spawn(one, Path(tmp)) for _ in range(2)]
+                        r = spawn(pspec, cache)
+                        if jit is not None and not any("error" in j for j in (*jit, r)):
+                            r["jit_cold_seconds"] = jit[0]["jit_seconds"]
+                            r["jit_seconds"] = jit[1]["jit_seconds"]
+                        results.append(r)
+                        msg = r.get("error") or (f"{r['water_particles']} particles, {r['mipps']:.3f} M particle-steps/s, "
+                                                 f"{1e3 * r['seconds_per_step']:.1f} ms/step")
+                        print(f"{mode} {ppe or ''} {dim}D {size} {arch}: {msg}", flush=True)
+    import taichi as ti
+
+    info = {"machine": machine(), "taichi": ".".join(map(str, ti.__version__)),
+            "threads": os.environ.get("TI_CPU_MAX_NUM_THREADS", os.cpu_count()), "load": load,
+            "date": time.strftime("%Y-%m-%d"), "args": " ".join(argv if argv is not None else sys.argv[1:])}
+    write_report(Path(args.out), results, info)
+    print(f"wrote {args.out}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

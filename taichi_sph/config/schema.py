@@ -192,13 +192,21 @@ class Obstacle(Box):
 
 
 class PPESolver(Strict):
-    #: sparse_cg: matrix assembled with ti.linalg.SparseMatrixBuilder, solved by SparseCG
-    type: Literal["sparse_cg"] = "sparse_cg"
+    #: sparse_cg: matrix assembled with ti.linalg.SparseMatrixBuilder, solved by SparseCG (Eigen CG
+    #: on CPU); ell_pcg: matrix in ELL form in Taichi fields, Jacobi-preconditioned CG in Taichi
+    #: kernels (measured faster: docs/performance.md)
+    type: Literal["sparse_cg", "ell_pcg"] = "ell_pcg"
     #: relative residual |b - A p| / |b| to reach
     tolerance: PosFloat = 1.0e-8
     max_iterations: PosInt = 2000
     #: what to do when CG stops before the tolerance: stop the run, or record and go on
     on_failure: Literal["error", "warn"] = "error"
+    #: ell_pcg only: floats of the matrix and CG vectors; auto = f64 when the tolerance is below
+    #: 1e-5 (f32 CG stalls near 1e-5 relative residual), else the run's precision
+    precision: Literal["auto", "f32", "f64"] = "auto"
+    #: ell_pcg only: off-diagonal entries a row can hold (default: 1.5 x the kernel's lattice
+    #: neighbour count, 30 in 2D and 84 in 3D, at most `neighbours.max`)
+    width: Optional[PosInt] = None
 
 
 class ISPH(Strict):
@@ -600,6 +608,7 @@ def check(cfg: "Config") -> None:
     _check_probes(cfg)
     _check_images(cfg)
     _check_metrics(cfg)
+    _check_ppe(cfg)
     if cfg.tank.periodic:
         _fail("tank.periodic", "periodic boundaries are not implemented yet; use slip walls")
     if min(cfg.tank.size) < 2 * cfg.dx:
@@ -772,3 +781,17 @@ def _check_metrics(cfg: "Config") -> None:
         elif m.level is not None:
             _fail(f"{key}.level", f"applies to stats first_above and first_below only (stat is {m.stat})")
         seen.append(m.name)
+#: relative residual below which an f32 conjugate gradient stalls (rounding of b - A x)
+F32_PPE_TOLERANCE = 1.0e-5
+
+
+def _check_ppe(cfg: Config) -> None:
+    """isph.ppe: the ELL-only keys need type ell_pcg; f32 cannot reach a tolerance below 1e-5."""
+    ppe = cfg.isph.ppe
+    if ppe.type != "ell_pcg":
+        for key in ("precision", "width"):
+            if key in ppe.model_fields_set:
+                _fail(f"isph.ppe.{key}", f"applies to isph.ppe.type ell_pcg only (type is {ppe.type})")
+    elif ppe.precision == "f32" and ppe.tolerance < F32_PPE_TOLERANCE:
+        _fail("isph.ppe.precision", f"f32 conjugate gradient stalls near a relative residual of "
+              f"{F32_PPE_TOLERANCE:g}; raise isph.ppe.tolerance ({ppe.tolerance:g}) or use f64")

@@ -25,6 +25,7 @@ import taichi as ti
 
 from ..backend import ids_text, is_f64
 from ..errors import InstabilityError
+from ..linalg.ell_pcg import EllOverflowError, EllPCG
 from ..linalg.sparse_cg import SparseCGSolver
 from ..scene import WALL, WATER
 from ..sph import kernels, operators
@@ -143,8 +144,17 @@ class ISPHSolver:
             self.nsurf_tab = ti.field(float, len(eps_tab))
             self.nsurf_tab.from_numpy((self.n_surf * n_tab / n_tab[-1]).astype(self.np_fp))
         fp = ti.f64 if is_f64() else ti.f32
-        self.ppe = SparseCGSolver(max(self.n_water, 1), max(self.n_water, 1) * (self.max_nb + 1), fp,
-                                  cfg.isph.ppe.tolerance, cfg.isph.ppe.max_iterations)
+        # PPE solver (ti.static switch in the assembly): ELL matrix + Jacobi-PCG, or the sparse builder
+        self.ppe_ell = cfg.isph.ppe.type == "ell_pcg"
+        if self.ppe_ell:
+            self.ppe = EllPCG(max(self.n_water, 1), ppe_width(cfg), cfg.isph.ppe.tolerance,
+                              cfg.isph.ppe.max_iterations, dtype=ppe_precision(cfg.isph.ppe, fp))
+            # the right-hand side and the solution live in the solver's fields (no host copies)
+            self.b = self.ppe.b
+            self.psol = self.ppe.x
+        else:
+            self.ppe = SparseCGSolver(max(self.n_water, 1), max(self.n_water, 1) * (self.max_nb + 1), fp,
+                                      cfg.isph.ppe.tolerance, cfg.isph.ppe.max_iterations)
         self.dirichlet_scale = self._lattice_laplacian_sum()
         self.removed_total = 0
         self.step_count = 0
@@ -392,6 +402,25 @@ class ISPHSolver:
 
     @ti.kernel
     def _k_assemble(self, A: ti.types.sparse_matrix_builder()):
+        """The PPE into a SparseMatrixBuilder (isph.ppe.type sparse_cg)."""
+        self._assemble(A)
+
+    @ti.kernel
+    def _k_assemble_ell(self):
+        """The PPE into the ELL matrix of EllPCG (isph.ppe.type ell_pcg)."""
+        self._assemble(0)
+
+    @ti.func
+    def _ppe_add(self, A: ti.template(), i, j, v):
+        """A[i, j] += v in the PPE matrix of the configured solver (only row i's thread writes row i)."""
+        if ti.static(self.ppe_ell):
+            self.ppe.add(i, j, v)
+        else:
+            A[i, j] += v
+            ti.atomic_add(self.triplets[None], 1)
+
+    @ti.func
+    def _assemble(self, A: ti.template()):
         """PPE rows (eq 31 in symmetric form, eq 23 divergence, eq 24 Laplacian); Dirichlet rows at the
         free surface (eq 34) and for inactive particles.
 
@@ -402,13 +431,16 @@ class ISPHSolver:
         sand: k falls by D ~ 2000 across one layer, and the eq 23 divergence of the jump in k rho_w g
         does not match the eq 24 Laplacian of a linear P, which left the water above the sand falling
         freely). Walls follow the same split: P_w - phi_w = P_i - phi_i (the hydrostatic Neumann
-        condition), so wall pairs add nothing but the mirrored v*_rest to the divergence."""
+        condition), so wall pairs add nothing but the mirrored v*_rest to the divergence.
+        The one place the coefficients are computed, for both solver types."""
         dt = self.dt[None]
         dirichlet_diag = self.dirichlet_scale * dt / self.rho_w
         self.triplets[None] = 0
         for i in range(self.n):
             if self.kind[i] == WATER:
                 ri = self.row[i]
+                if ti.static(self.ppe_ell):
+                    self.ppe.start_row(ri)
                 if self.solve_mask[i] == 1 and self.free[i] == 0:
                     xi = self.x[i]
                     k_i = self.kcoef[i]
@@ -442,8 +474,7 @@ class ISPHSolver:
                                 if self.free[j] == 1 or self.solve_mask[j] == 0:
                                     rhs += K * self._dirichlet_value(j)
                                 else:
-                                    A[ri, self.row[j]] += -K
-                                    ti.atomic_add(self.triplets[None], 1)
+                                    self._ppe_add(A, ri, self.row[j], -K)
                     div /= rb_i
                     rho_ref = rb_i
                     if ti.static(self.porous):
@@ -455,13 +486,11 @@ class ISPHSolver:
                         # pressures of many rho g H
                         stab /= self.drag[i]
                     source = div + stab
-                    A[ri, ri] += diag
-                    ti.atomic_add(self.triplets[None], 1)
-                    self.b[ri] = rhs - source
+                    self._ppe_add(A, ri, ri, diag)
+                    self.b[ri] = ti.cast(rhs - source, self.b.dtype)
                 else:
-                    A[ri, ri] += dirichlet_diag
-                    ti.atomic_add(self.triplets[None], 1)
-                    self.b[ri] = dirichlet_diag * self._dirichlet_value(i)
+                    self._ppe_add(A, ri, ri, dirichlet_diag)
+                    self.b[ri] = ti.cast(dirichlet_diag * self._dirichlet_value(i), self.b.dtype)
 
     @ti.func
     def _dirichlet_value(self, i):
@@ -480,7 +509,7 @@ class ISPHSolver:
     def _k_gather_pressure(self):
         for i in range(self.n):
             if self.kind[i] == WATER:
-                self.psol[self.row[i]] = self.p[i]
+                self.psol[self.row[i]] = ti.cast(self.p[i], self.psol.dtype)
 
     @ti.kernel
     def _k_wall_pressure(self):
@@ -695,14 +724,27 @@ class ISPHSolver:
         self.dt[None] = dt
         self._k_predictor()
         t0 = self._tick("predictor", t0)
-        self._k_assemble(self.ppe.builder)
-        self.ppe.check_triplets(int(self.triplets[None]))
-        self.ppe.build()
-        self._k_gather_pressure()
-        b = self.b.to_numpy()[: self.n_water]
-        x0 = self.psol.to_numpy()[: self.n_water]
-        t0 = self._tick("ppe_assembly", t0)
-        sol, iters, res, ok = self.ppe.solve(b, x0)
+        if self.ppe_ell:
+            self._k_gather_pressure()  # warm start: the solver's x is the last pressure in this step's rows
+            self._k_assemble_ell()
+            t0 = self._tick("ppe_assembly", t0)
+            try:
+                iters, res, ok = self.ppe.solve(self.n_water)
+            except EllOverflowError as exc:
+                raise InstabilityError(
+                    f"step {self.step_count + 1}, t = {self.time + dt:.6g} s: a PPE row has {exc.needed} "
+                    f"off-diagonal entries but the ELL matrix holds {exc.capacity}; raise the config key "
+                    f"`isph.ppe.width` to at least {exc.needed}", step=self.step_count + 1,
+                    time=self.time + dt, quantity="PPE row width") from None
+        else:
+            self._k_assemble(self.ppe.builder)
+            self.ppe.check_triplets(int(self.triplets[None]))
+            self.ppe.build()
+            self._k_gather_pressure()
+            b = self.b.to_numpy()[: self.n_water]
+            x0 = self.psol.to_numpy()[: self.n_water]
+            t0 = self._tick("ppe_assembly", t0)
+            sol, iters, res, ok = self.ppe.solve(b, x0)
         t0 = self._tick("ppe_solve", t0)
         if not ok:
             msg = (f"step {self.step_count + 1}, t = {self.time + dt:.6g} s: PPE solver did not converge "
@@ -710,7 +752,8 @@ class ISPHSolver:
             if self.cfg.isph.ppe.on_failure == "error" or not np.isfinite(res):
                 raise InstabilityError(msg, step=self.step_count + 1, time=self.time + dt, quantity="PPE residual")
             log.warning(msg)
-        self.psol.from_numpy(sol.astype(self.np_fp))
+        if not self.ppe_ell:
+            self.psol.from_numpy(sol.astype(self.np_fp))
         self._k_scatter_pressure()
         self._k_wall_pressure()
         self._k_corrector()
@@ -791,6 +834,28 @@ class ISPHSolver:
         from ..sph.state import restore
 
         restore(self, state, self.state_fields, self.state_scalars)
+
+
+def ppe_width(cfg) -> int:
+    """ELL row width of the PPE: `isph.ppe.width`, or 1.5 x the kernel's lattice neighbour count (20 in
+    2D, 56 in 3D), at most the neighbour-list capacity. Rows are strided by the width, so it costs
+    memory traffic; water in a PPE stays near the lattice spacing (incompressible), and the solve
+    names `isph.ppe.width` when a row needs more."""
+    if cfg.isph.ppe.width is not None:
+        return int(cfg.isph.ppe.width)
+    lattice = kernels.lattice_sums(cfg.dim)["neighbours"]
+    return min(int(math.ceil(1.5 * lattice)), cfg.max_neighbours())
+
+
+def ppe_precision(ppe_cfg, runtime_fp):
+    """Floats of the ELL PPE solve: the key, or f64 when the tolerance is below what f32 CG reaches."""
+    from ..config.schema import F32_PPE_TOLERANCE
+
+    if ppe_cfg.precision == "f64" or (ppe_cfg.precision == "auto" and ppe_cfg.tolerance < F32_PPE_TOLERANCE):
+        return ti.f64
+    if ppe_cfg.precision == "f32":
+        return ti.f32
+    return runtime_fp
 
 
 def _spline(q: float) -> float:

@@ -146,14 +146,15 @@ class EllPCG:
 
     @ti.func
     def add(self, i, j, v):
-        """A[i, j] += v. Only the thread that owns row i may call it (no atomics)."""
+        """A[i, j] += v (v cast to the solver's float). Only the thread that owns row i may call it."""
+        vc = ti.cast(v, self.dtype)
         if j == i:
-            self.diag[i] += v
+            self.diag[i] += vc
         else:
             k = self.count[i]
             if k < self.max_nb:
                 self.cols[i, k] = j
-                self.vals[i, k] = v
+                self.vals[i, k] = vc
             else:
                 ti.atomic_max(self.overflow[None], k + 1)
             self.count[i] = k + 1

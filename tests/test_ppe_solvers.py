@@ -1,0 +1,65 @@
+"""The two PPE solvers of mode isph (isph.ppe.type sparse_cg and ell_pcg) solve the same system:
+the same pressure to the solver tolerance on a hydrostatic tank and on water in porous ground.
+
+Both solvers are built from the same config and scene and take the same steps; the matrices come
+from the one assembly function, so the pressures may differ only by what each CG leaves unsolved.
+"""
+
+import numpy as np
+import pytest
+
+from .conftest import ROOT
+
+TOL = 1.0e-10
+
+
+def _solver(path, extra, ppe_type, steps, dt, tol=TOL):
+    from taichi_sph.config import load_config
+    from taichi_sph.isph.solver import ISPHSolver
+    from taichi_sph.scene import build_scene
+
+    cfg = load_config(path, overrides=[f"isph.ppe.type={ppe_type}", f"isph.ppe.tolerance={tol:.1e}",
+                                       "isph.ppe.max_iterations=20000", *extra])
+    solver = ISPHSolver(cfg, build_scene(cfg))
+    solver.initial_diagnostics()
+    for _ in range(steps):
+        last = solver.step(dt)
+        assert last["cg_residual"] <= tol
+    return solver
+
+
+# the hydrostatic tank made small (20 x 15 water particles) to keep the dense condition number cheap
+SMALL_TANK = ["tank.size=[0.2, 0.2]", "water=[{min: [0.0, 0.0], max: [0.2, 0.15]}]"]
+
+
+@pytest.mark.parametrize("case, extra, ell_tol", [
+    ("hydrostatic.yaml", SMALL_TANK, TOL),
+    ("darcy_column.yaml", [], TOL),
+    # the ELL solve in f32, to the smallest tolerance f32 reaches
+    ("hydrostatic.yaml", [*SMALL_TANK, "isph.ppe.precision=f32"], 1.0e-5),
+])
+def test_sparse_and_ell_give_the_same_pressure(ti_cpu, case, extra, ell_tol):
+    path = ROOT / "configs" / case
+    sparse = _solver(path, [e for e in extra if "precision" not in e], "sparse_cg", 3, 1e-3)
+    ell = _solver(path, extra, "ell_pcg", 3, 1e-3, ell_tol)
+    assert ell.ppe.name == "ell_pcg" and sparse.ppe.name == "sparse_cg"
+    if case == "darcy_column.yaml":
+        assert ell.porous  # the porous-ground coefficients are in the system
+    p_s, p_e = (s.fields_by_id()["pressure"] for s in (sparse, ell))
+    water = sparse.fields_by_id()["density"] > 0  # every particle; walls carry interpolated pressure
+    assert np.all(water)
+    # Bound: each CG stops at |b - A x| <= tol |b|, so |x - x*| <= cond(A) tol |x*| for each, and
+    # the two differ by at most cond(A) (TOL + ell_tol) |x*|. cond(A) is computed from the ELL matrix of the
+    # last step (its 2-norm condition number, dense: the systems hold a few hundred rows). The
+    # pressures of earlier steps enter only through positions, moved by dt |grad p| differences of
+    # the same relative size, far below the bound.
+    A = ell.ppe.to_csr(ell.n_water).toarray()
+    cond = np.linalg.cond(A)
+    assert cond < 1e6  # the bound below means something only for a well-conditioned PPE
+    diff = np.linalg.norm(p_s - p_e) / np.linalg.norm(p_s)
+    print(f"{case}: {ell.n_water} rows, cond {cond:.3g}, relative difference {diff:.3g}")
+    assert diff <= cond * (TOL + ell_tol), (diff, cond)
+    if ell_tol > TOL:
+        assert ell.ppe.dtype == ti_cpu.f32
+    # and a non-trivial pressure field was solved (hydrostatic: rho g H = 1.5 kPa at the bottom)
+    assert np.max(np.abs(p_s)) > 100.0
