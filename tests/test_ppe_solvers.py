@@ -63,3 +63,17 @@ def test_sparse_and_ell_give_the_same_pressure(ti_cpu, case, extra, ell_tol):
         assert ell.ppe.dtype == ti_cpu.f32
     # and a non-trivial pressure field was solved (hydrostatic: rho g H = 1.5 kPa at the bottom)
     assert np.max(np.abs(p_s)) > 100.0
+
+
+def test_ell_row_overflow_names_the_key(ti_cpu):
+    """A PPE row wider than isph.ppe.width stops the step with an error naming that key (an interior
+    row of water at rest has 20 water neighbours in 2D; a width of 8 cannot hold it)."""
+    from taichi_sph.errors import InstabilityError
+    from taichi_sph.isph.solver import ppe_width
+
+    with pytest.raises(InstabilityError, match=r"isph.ppe.width.*at least 2\d"):
+        _solver(ROOT / "configs" / "hydrostatic.yaml", [*SMALL_TANK, "isph.ppe.width=8"], "ell_pcg", 1, 1e-3)
+    from taichi_sph.config import load_config
+
+    cfg = load_config(ROOT / "configs" / "hydrostatic.yaml")
+    assert ppe_width(cfg) == 30  # 1.5 x the 20 lattice neighbours within 2.4 dx in 2D

@@ -223,9 +223,28 @@ def markdown(results, info) -> str:
     return "\n".join(lines)
 
 
-def write_report(out: Path, results, info) -> None:
+def _key(r) -> tuple:
+    return (r["mode"], r.get("ppe") or "", r["dim"], r["size"], r["arch"])
+
+
+def merged(old: list, new: list) -> list:
+    """The new results, plus the old ones of cases not run this time, in matrix order."""
+    keys = {_key(r) for r in new}
+    rows = [r for r in old if _key(r) not in keys] + list(new)
+    modes, sizes = list(MODES), list(SIZES)
+    return sorted(rows, key=lambda r: (r["arch"], modes.index(r["mode"]), r.get("ppe") or "", r["dim"],
+                                       sizes.index(r["size"])))
+
+
+def write_report(out: Path, results, info, keep: bool = False) -> None:
+    """JSON beside `out` and the table between the markers; `keep`: merge with the cases already there."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps({"info": info, "results": results}, indent=2))
+    js = out.with_suffix(".json")
+    if keep and js.exists():
+        old = json.loads(js.read_text())
+        results = merged(old.get("results", []), results)
+        info = {**info, "args": f"{old.get('info', {}).get('args', '')}; then {info['args']}"}
+    js.write_text(json.dumps({"info": info, "results": results}, indent=2))
     block = f"{BEGIN}\n{markdown(results, info)}\n{END}"
     text = out.read_text() if out.exists() else "# Performance\n\n"
     if BEGIN in text and END in text:
@@ -248,6 +267,8 @@ def main(argv=None) -> int:
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                     help="config override for every case, e.g. isph.ppe.type=sparse_cg")
     ap.add_argument("--out", default=str(ROOT / "docs" / "performance.md"))
+    ap.add_argument("--keep", action="store_true", help="keep the cases already in the report that this run "
+                    "does not repeat (add sizes or modes to an earlier run)")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--child-out", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -292,7 +313,7 @@ def main(argv=None) -> int:
     info = {"machine": machine(), "taichi": ".".join(map(str, ti.__version__)),
             "threads": os.environ.get("TI_CPU_MAX_NUM_THREADS", os.cpu_count()), "load": load,
             "date": time.strftime("%Y-%m-%d"), "args": " ".join(argv if argv is not None else sys.argv[1:])}
-    write_report(Path(args.out), results, info)
+    write_report(Path(args.out), results, info, keep=args.keep)
     print(f"wrote {args.out}")
     return 0
 
