@@ -334,6 +334,14 @@ class Guard(Strict):
     max_speed: Optional[PosFloat] = None
     #: particles leaving the domain: remove with a warning and count, or stop the run
     out_of_domain: Literal["remove", "error"] = "remove"
+    #: full host-side check (non-finite state, density ratio, wall particles at rest) every this many steps
+    #: and at every frame; speed and non-finite reductions are checked every step
+    every: PosInt = 10
+    #: stop when a water or air particle's density exceeds this multiple of its reference density
+    max_density_ratio: PosFloat | None = 1.5
+    #: stop when a water or air particle's density falls below this multiple of its reference density
+    #: (off by default: free-surface particles of mode isph have a low number density)
+    min_density_ratio: PosFloat | None = None
 
 
 class Config(Strict):
