@@ -28,6 +28,8 @@ log = logging.getLogger("taichi_sph")
 
 WALL_KIND = 1
 WATER_KIND = 0
+#: guard.max_density_ratio when not given, per mode (see the key's documentation)
+DEFAULT_MAX_DENSITY_RATIO = {"wcsph_biot": 1.3, "isph": 3.0}
 #: a wall particle counts as moved beyond this fraction of dx (walls are never integrated: exact zero)
 WALL_TOLERANCE = 1.0e-6
 
@@ -84,7 +86,7 @@ class StabilityGuard:
         g = cfg.guard
         self.every = g.every
         self.speed_bound = float(speed_bound)
-        self.max_ratio = g.max_density_ratio
+        self.max_ratio = g.max_density_ratio or DEFAULT_MAX_DENSITY_RATIO[cfg.mode]
         self.min_ratio = g.min_density_ratio
         self.kind = np.asarray(kind)
         self.rho_ref = np.asarray(rho_ref, dtype=float)

@@ -17,7 +17,7 @@ RHO_REF = np.array([1000.0, 1000.0, 1000.0, 1000.0, 1000.0, 1.2])
 
 def _cfg(**guard):
     g = {"every": 1, "max_density_ratio": 1.5, "min_density_ratio": None, "out_of_domain": "remove"} | guard
-    return SimpleNamespace(dx=0.01, guard=SimpleNamespace(**g))
+    return SimpleNamespace(dx=0.01, mode="isph", guard=SimpleNamespace(**g))
 
 
 def _fields(n=6):
@@ -110,15 +110,15 @@ def test_exit_codes_distinct_and_flag():
 
 
 @pytest.mark.parametrize("case", [
-    # isph dam break at dx 1 cm: the CFL limit with cfl 0.2 and the release speed 1.4 m/s is 1.43 ms
-    ("configs/dambreak.yaml", ["dx=0.01", "end_time=0.3", "dt=0.0143"]),
-    # wcsph dam break: eq 49's coefficients 10x their defaults (0.25)
+    # wcsph dam break: eq 49's coefficients 10x their defaults (0.25). Measured: stops at step 10 with the
+    # density ratio 1.56 > 1.3. (Mode isph survives a fixed dt 10x its CFL limit on this dam break, its
+    # projection being implicit: see docs/stability.md, so it has no case here.)
     ("configs/dambreak_wcsph.yaml", ["dx=0.05", "end_time=0.3", "timestep.cfl=2.5", "timestep.force=2.5"]),
 ])
 def test_dt_ten_times_the_limit_stops_named(run_cli, tmp_path, case):
     config, sets = case
     out = tmp_path / "u.h5"
-    args = ["--config", config, "--out", out, "--no-progress", "--set", "output.every=0.0286"]
+    args = ["--config", config, "--out", out, "--no-progress", "--set", "output.every=0.02"]
     for s in sets:
         args += ["--set", s]
     proc = run_cli(*args, timeout=300)
