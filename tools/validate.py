@@ -108,8 +108,9 @@ HYDRO_H = 0.30
 @case("hydrostatic", "Hydrostatic tank (2D), both modes", "P = rho g H at the floor",
       "floor pressure within 1 % at 40 particles over the depth; speed < 1e-3 sqrt(g H) after 5 s", 0.01)
 def _hydrostatic(setting):
-    depths = (10, 20, 40) if setting == "small" else (10, 20, 40, 80)
-    end = 1.0 if setting == "small" else 5.0
+    # depths whose spacing also divides the tank width (0.4 m) and the water depth (0.3 m)
+    depths = (12, 24, 36) if setting == "small" else (12, 24, 48, 96)
+    end = 0.5 if setting == "small" else 5.0
     runs = []
     for mode in ("isph", "wcsph_biot"):
         for n in depths:
@@ -140,7 +141,7 @@ DAM_CONFIG = {"isph": "configs/dambreak.yaml", "wcsph_biot": "configs/dambreak_w
 @case("dambreak", "Dam break (2D) surge front, both modes", "Martin & Moyce (1952), column a x 2a, n^2 = 2",
       "front within 5 % for T in [1, 3]", 0.05)
 def _dambreak(setting):
-    ratios = (10, 20, 40) if setting == "small" else (10, 20, 40, 80)
+    ratios = (10, 15, 20) if setting == "small" else (10, 20, 40, 80)
     runs = []
     for mode, a in DAM_A.items():
         end = 3.05 / math.sqrt(2 * G / a)
@@ -190,6 +191,7 @@ def _darcy(setting):
 
 
 FREEFALL_ARRIVAL = {0.3: 0.42, 0.5: 0.34, 0.8: 0.26}  # seed 000 section 5, s
+FREEFALL_VARIANT = {0.3: "", 0.5: "eps05", 0.8: "eps08"}  # variants of configs/freefall.yaml
 LAYER = (0.2, 0.4)  # porous layer of configs/freefall.yaml, m
 
 
@@ -199,16 +201,17 @@ LAYER = (0.2, 0.4)  # porous layer of configs/freefall.yaml, m
       "with alpha = 0.01", 0.10)
 def _freefall(setting):
     if setting == "small":
-        dxs, eps_list, alphas, end = (0.04, 0.0333, 0.025), (0.5,), (0.01, 0.0), 0.7
+        dxs, eps_list, alphas, end = (0.04, 0.0333, 0.0286), (0.5,), (0.01, 0.0), 0.6
     else:
         dxs, eps_list, alphas, end = (0.02, 0.0143, 0.01), (0.3, 0.5, 0.8), (0.01, 0.0), 2.5
     runs = []
     for eps0 in eps_list:
         for alpha in alphas:
             for dx in dxs:
-                sets = [f"dx={dx:g}", f"dt={min(0.001, 0.1 * dx):.4g}", f"end_time={end}", "output.every=0.01",
-                        f"soil.regions[0].eps0={eps0}", f"isph.alpha={alpha}"]
-                runs.append(Run(f"eps0 {eps0}, alpha {alpha}", dx, "configs/freefall.yaml", sets))
+                sets = [f"dx={dx:g}", f"dt={0.1 * dx:.4g}", f"end_time={end}", "output.every=0.01",
+                        f"isph.alpha={alpha}"]
+                args = ["--variant", FREEFALL_VARIANT[eps0]] if FREEFALL_VARIANT[eps0] else []
+                runs.append(Run(f"eps0 {eps0}, alpha {alpha}", dx, "configs/freefall.yaml", sets, args))
 
     def evaluate(path, run):
         from taichi_sph.io.hdf5 import RunFile
