@@ -65,7 +65,7 @@ def cells(axes=None) -> list[Cell]:
             config, sets = _dam(mode, 3.0, f"fluid.viscosity={1e-6 * nu_factor:g}")
             out.append(Cell("viscosity", f"{nu_factor}x water", mode, config, sets))
         for jit in (0.05, 0.1, 0.2):
-            config, sets = _dam(mode, 3.0, f"water[0].jitter={jit}")
+            config, sets = _dam(mode, 3.0, f"water.0.jitter={jit}")
             out.append(Cell("jitter", f"{jit:g} dx", mode, config, sets))
         out.append(Cell("still water", "20 s", mode, "configs/hydrostatic.yaml",
                         [f"mode={mode}", "dx=0.03", "end_time=20", "output.every=2"]))
@@ -73,10 +73,10 @@ def cells(axes=None) -> list[Cell]:
         out.append(Cell("violent impact", "dam break to T = 12", mode, config, sets))
     for eps0 in (0.1, 0.3, 0.5, 0.8, 0.95):
         out.append(Cell("eps0", f"{eps0:g}", "isph", "configs/darcy_column.yaml",
-                        ["dx=0.02", f"water[0].porosity={eps0}", f"soil.regions[0].eps0={eps0}"]))
+                        ["dx=0.02", f"water.0.porosity={eps0}", f"soil.regions.0.eps0={eps0}"]))
     for d50 in (1e-4, 1e-3, 1e-2, 1e-1):
         out.append(Cell("D50", f"{d50 * 1000:g} mm", "isph", "configs/darcy_column.yaml",
-                        ["dx=0.02", f"soil.regions[0].d50={d50:g}"]))
+                        ["dx=0.02", f"soil.regions.0.d50={d50:g}"]))
     if axes:
         out = [c for c in out if c.axis in axes]
     return out
