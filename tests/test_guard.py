@@ -63,6 +63,10 @@ def test_density_ratio_bounds_exit_3():
     # a wall particle's density is never checked; an inactive (removed) particle neither
     f = _fields()
     f["density"][3] = 5000.0
+    g = StabilityGuard(_cfg(), np.array([0, 0, 0, 1, 2, 3]), RHO_REF, speed_bound=5.0)  # particle 4 soil
+    f4 = _fields()
+    f4["density"][4] = 2650.0
+    g.check_fields(3, 0.2, f4)
     f["density"][0], f["active"][0] = 5000.0, False
     _guard().check_fields(3, 0.2, f)
     # the lower bound is off unless set
