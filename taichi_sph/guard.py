@@ -23,12 +23,10 @@ import numpy as np
 
 from .backend import ids_text
 from .errors import InstabilityError
+from .scene import AIR, WALL, WATER
 
 log = logging.getLogger("taichi_sph")
 
-WALL_KIND = 1
-WATER_KIND = 0
-AIR_KIND = 3
 #: guard.max_density_ratio when not given, per mode (see the key's documentation)
 DEFAULT_MAX_DENSITY_RATIO = {"wcsph_biot": 1.3, "isph": 3.0}
 #: a wall particle counts as moved beyond this fraction of dx (walls are never integrated: exact zero)
@@ -92,8 +90,8 @@ class StabilityGuard:
         self.kind = np.asarray(kind)
         self.rho_ref = np.asarray(rho_ref, dtype=float)
         # density ratio of water and air only (soil has its own density and no such bound here)
-        self.fluid = np.isin(self.kind, (WATER_KIND, AIR_KIND))
-        self.wall = self.kind == WALL_KIND
+        self.fluid = np.isin(self.kind, (WATER, AIR))
+        self.wall = self.kind == WALL
         self.wall_tol = WALL_TOLERANCE * cfg.dx
         self.wall0 = None
 
