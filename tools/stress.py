@@ -68,7 +68,7 @@ def cells(axes=None) -> list[Cell]:
             config, sets = _dam(mode, 3.0, f"water.0.jitter={jit}")
             out.append(Cell("jitter", f"{jit:g} dx", mode, config, sets))
         out.append(Cell("still water", "20 s", mode, "configs/hydrostatic.yaml",
-                        [f"mode={mode}", "dx=0.03", "end_time=20", "output.every=2"]))
+                        [f"mode={mode}", "dx=0.025", "end_time=20", "output.every=2"]))
         config, sets = _dam(mode, 12.0)
         out.append(Cell("violent impact", "dam break to T = 12", mode, config, sets))
     for eps0 in (0.1, 0.3, 0.5, 0.8, 0.95):
@@ -112,6 +112,8 @@ def measure(path: Path) -> dict:
 
     with RunFile(path) as rf:
         d = rf.diagnostics()
+        if "time" not in d or not len(d["time"]):  # stopped inside the first step: frame 0 only
+            d = {"time": np.zeros(0)}
         m = float(rf.attrs["particle_mass"])
         water = rf.kind == 0
 
@@ -120,7 +122,7 @@ def measure(path: Path) -> dict:
             z = f["position"][water & f["active"]][:, -1]
             return m * G * float(np.sum(z))
 
-        e0 = potential(0) + float(d["kinetic_energy"][0]) if len(d["time"]) else potential(0)
+        e0 = potential(0) + (float(d["kinetic_energy"][0]) if len(d["time"]) else 0.0)
         e1 = potential(rf.n_frames - 1) + (float(d["kinetic_energy"][-1]) if len(d["time"]) else 0.0)
         e_ref = potential(0) - m * G * float(rf.frame(0)["position"][water][:, -1].min()) * water.sum()
         return {"t_end": float(rf.times[-1]), "volume_drift": float(d["water_volume"][-1] / d["water_volume"][0] - 1)
