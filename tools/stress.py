@@ -175,7 +175,7 @@ def heat_map(rows, path: Path) -> None:
         ax.text(j, i, s, ha="center", va="center", fontsize=6)
     ax.set_xticks(range(len(MODES)), MODES)
     ax.set_yticks(range(len(labels)), labels, fontsize=7)
-    ax.set_title("stability matrix (grey: not run for that mode)", fontsize=9)
+    ax.set_title("stability matrix (blank: not run for that mode)", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
