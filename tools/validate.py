@@ -238,10 +238,51 @@ def _freefall(setting):
     return runs, evaluate
 
 
-pending("poiseuille_taylor_green", "Poiseuille/Couette flow and Taylor-Green decay",
-        "analytic velocity profile and decay exp(-2 nu k^2 t)", "not in SPEC 7 as a number",
+CHANNEL_L, CHANNEL_NU = 0.02, 1.0e-3  # configs/channel_startup.yaml: channel width (m), viscosity (m^2/s)
+
+
+def channel_startup_velocity(x, t, L=CHANNEL_L, nu=CHANNEL_NU, g=G, terms=200):
+    """Start-up of plane Poiseuille flow driven by gravity from rest, u = 0 at x = 0 and L:
+    u = g x (L - x) / (2 nu) - sum_{n odd} 4 g L^2 / (nu pi^3 n^3) sin(n pi x / L) exp(-nu n^2 pi^2 t / L^2)."""
+    x = np.asarray(x, float)
+    u = g / (2 * nu) * x * (L - x)
+    for n in range(1, 2 * terms, 2):
+        u -= 4 * g * L**2 / (nu * math.pi**3 * n**3) * np.sin(n * math.pi * x / L) * math.exp(
+            -nu * n * n * math.pi**2 * t / L**2)
+    return u
+
+
+@case("channel_startup", "Start-up of gravity-driven plane Poiseuille flow (2D), both modes",
+      "series solution of u_t = g + nu u_xx, u = 0 at the walls (a free slab falling between no-slip walls; "
+      "no periodic boundaries needed)", "none in SPEC 7 (viscosity and wall accuracy)", None)
+def _channel(setting):
+    dxs = (0.004, 0.002, 0.001) if setting == "small" else (0.002, 0.001, 0.0005, 0.00025)
+    runs = [Run(mode, dx, "configs/channel_startup.yaml", [f"mode={mode}", f"dx={dx:g}"])
+            for mode in ("isph", "wcsph_biot") for dx in dxs]
+
+    def evaluate(path, run):
+        from taichi_sph.io.hdf5 import RunFile
+
+        u_ss = G * CHANNEL_L**2 / (8 * CHANNEL_NU)
+        with RunFile(path) as rf:
+            f = rf.frame(-1)
+            t = float(rf.times[-1])
+            w = (rf.kind == 0) & f["active"]
+            x = f["position"][w]
+            # the slab's middle, away from its free ends by one channel width
+            band = np.abs(x[:, -1] - np.median(x[:, -1])) < CHANNEL_L
+            u = -f["velocity"][w][band, -1]
+            ue = channel_startup_velocity(x[band, 0], t)
+        return {"error": float(np.sqrt(np.mean((u - ue) ** 2)) / u_ss),
+                "centre u / exact": float(u.max() / ue.max())}
+
+    return runs, evaluate
+
+
+pending("taylor_green", "Taylor-Green vortex decay", "decay exp(-2 nu k^2 t)", "none in SPEC 7",
         "needs periodic boundaries (the neighbour grid and both solvers use plain differences x_i - x_j) and an "
-        "initial velocity field in the config; neither exists in this version")
+        "initial velocity field in the config, neither of which this version has; viscosity and walls are "
+        "validated without periodicity by channel_startup")
 for _name, _title, _ref, _target in (
         ("terzaghi", "Terzaghi consolidation (wcsph_biot)", "1D series solution, double drainage",
          "isochrones within 3 %"),
@@ -367,6 +408,8 @@ def plot_case(c: Case, result: dict, img_dir: Path) -> str | None:
 
 
 DIAGNOSES = {
+    "channel_startup": "mode wcsph_biot stays near 3 % of the steady centre speed at every resolution tried (its "
+                       "centre runs ahead of the series); the source, not one of dx, is not yet identified.",
     "hydrostatic": "the floor pressure is extrapolated from the bottom row of particles; the surface of a "
                    "particle method sits O(dx) off the true one (isph: half-layer surface pressure; wcsph: "
                    "eq 27 normalisation averages the bottom rows), so the error falls about as dx.",
