@@ -15,6 +15,7 @@ import numpy as np
 from . import __version__
 from .config import resolved_yaml
 from .errors import InstabilityError
+from .guard import StabilityGuard, flag_field
 from .scene import build_scene, describe
 
 log = logging.getLogger("taichi_sph")
@@ -141,10 +142,12 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     step_wall = 0.0
     volume0 = 0.0
     try:
+        guard = StabilityGuard(cfg, scene.kind, _reference_density(solver, scene.kind), solver.max_speed_bound())
         every = cfg.output.every
         if saved is None:
             first = solver.initial_diagnostics()
-            fields0 = solver.fields_by_id()
+            fields0 = _with_flag(solver.fields_by_id())
+            guard.start(fields0)
             extras.after_step(0.0, lambda: fields0)
             extras.after_frame(writer.write_frame(0.0, fields0), 0.0, fields0)
             volume0 = first["water_volume"]
@@ -152,12 +155,12 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             t = 0.0
             last = first
         else:
+            guard.start(_with_flag(solver.fields_by_id()))  # walls have not moved since t = 0
             extras.resume(saved)
             volume0, next_out, t, last = saved["volume0"], saved["next_out"], saved["t"], saved["last"]
             checkpoints.next = saved["next_checkpoint"]
         summary["compile_and_setup_seconds"] = _time.perf_counter() - t_compile
         n_fixed = None if stepper.fixed is None or propose is not None else int(round(cfg.end_time / stepper.fixed))
-        speed_bound = solver.max_speed_bound()
         checkpoints.catch_sigint()
         while True:
             if n_fixed is not None:
@@ -177,15 +180,13 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             driver = {"time": t, "dt": dt, "wall_seconds": s1 - s0, "dt_limit": limit}
             for key, column in diag.items():
                 column.append(driver[key] if key in driver else last[key])
-            if last["max_speed"] > speed_bound:
-                pid = _fastest_particle(solver)
-                raise InstabilityError(
-                    f"step {solver.step_count}, t = {t:.6g} s: speed {last['max_speed']:.4g} m/s exceeds the bound "
-                    f"{speed_bound:.4g} m/s (guard.max_speed) at particle id {pid}", step=solver.step_count, time=t,
-                    quantity="speed", particles=[pid])
-            fields = extras.after_step(t, solver.fields_by_id)
-            if t >= next_out - 1e-9 * every:
-                fields = fields if fields is not None else solver.fields_by_id()
+            guard.after_step(solver.step_count, t, last, lambda: _fastest_particle(solver))
+            fields = extras.after_step(t, lambda: _with_flag(solver.fields_by_id()))
+            frame_due = t >= next_out - 1e-9 * every
+            if frame_due or guard.due(solver.step_count):
+                fields = fields if fields is not None else _with_flag(solver.fields_by_id())
+                guard.check_fields(solver.step_count, t, fields)
+            if frame_due:
                 extras.after_frame(writer.write_frame(t, fields), t, fields)
                 _flush_diag(writer, diag)
                 while next_out <= t + 1e-9 * every:
@@ -201,8 +202,10 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     except InstabilityError as exc:
         summary["status"] = "unstable"
         summary["error"] = str(exc)
+        writer.set_attrs(unstable_quantity=exc.quantity, unstable_family=exc.family, exit_code=exc.exit_code,
+                         unstable_step=exc.step, unstable_particles=np.asarray(exc.particles[:1000], dtype=np.int64))
         try:
-            writer.write_frame(solver.time, solver.fields_by_id())
+            writer.write_frame(solver.time, _with_flag(solver.fields_by_id(), exc.particles))
         except Exception:  # noqa: BLE001  (the state may be beyond writing; earlier frames are kept)
             pass
         raise
@@ -267,6 +270,20 @@ def _flush_diag(writer, diag):
         writer.append_diagnostics({k: np.asarray(v) for k, v in diag.items()})
         for v in diag.values():
             v.clear()
+
+
+def _with_flag(fields: dict, ids=()) -> dict:
+    """Frame fields plus `flag` (1 at the particles that stopped the run, see taichi_sph/guard.py)."""
+    fields = dict(fields)
+    fields["flag"] = flag_field(len(fields["active"]), ids)
+    return fields
+
+
+def _reference_density(solver, kind) -> np.ndarray:
+    """Reference density of each particle for the guard's density ratio (air: its own, else water)."""
+    from .scene import AIR
+
+    return np.where(np.asarray(kind) == AIR, getattr(solver, "rho_a", solver.rho_w), solver.rho_w)
 
 
 def _fastest_particle(solver) -> int:

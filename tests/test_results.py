@@ -120,7 +120,7 @@ def test_xdmf_beside_the_run_names_existing_datasets_with_their_shapes(hydro):
             assert path in f, path
             assert f[path].shape == tuple(int(x) for x in item.get("Dimensions").split()), path
             n_refs += 1
-        assert n_refs == 7 * (1 + 4 + 2)  # per frame: geometry, 4 frame fields, kind and id
+        assert n_refs == 7 * (1 + 5 + 2)  # per frame: geometry, 5 frame fields (with flag), kind and id
 
 
 def test_pictures_during_the_run(hydro, offscreen):

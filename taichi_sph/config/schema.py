@@ -48,6 +48,9 @@ class WaterBlock(Box):
     #: fill the block at the density of water in ground of this porosity: lattice spacing
     #: dx / porosity^(1/dim), so each particle keeps the mass rho_w dx^dim (seed 000 eq 33)
     porosity: Annotated[float, Field(gt=0, le=1)] = 1.0
+    #: random displacement of each particle, uniform in [-jitter, jitter] x dx along each axis (stability
+    #: tests; a fixed seed, so a run repeats); at most 0.5
+    jitter: Annotated[float, Field(ge=0, le=0.5)] = 0.0
 
 
 class SoilRegion(Strict):
@@ -448,6 +451,16 @@ class Guard(Strict):
     max_speed: Optional[PosFloat] = None
     #: particles leaving the domain: remove with a warning and count, or stop the run
     out_of_domain: Literal["remove", "error"] = "remove"
+    #: full host-side check (non-finite state, density ratio, wall particles at rest) every this many steps
+    #: and at every frame; speed and non-finite reductions are checked every step
+    every: PosInt = 10
+    #: stop when a water or air particle's density exceeds this multiple of its reference density; default
+    #: 1.3 in mode wcsph_biot (Tait pressure ~6 B there) and 3 in mode isph (its number density reaches 1.6
+    #: at the floor of a fine dam break that still runs well)
+    max_density_ratio: PosFloat | None = None
+    #: stop when a water or air particle's density falls below this multiple of its reference density
+    #: (off by default: free-surface particles of mode isph have a low number density)
+    min_density_ratio: PosFloat | None = None
 
 
 class Checkpoint(Strict):

@@ -23,7 +23,8 @@ import time as _time
 import numpy as np
 import taichi as ti
 
-from ..backend import ids_text, is_f64
+from .. import guard
+from ..backend import is_f64
 from ..errors import InstabilityError
 from ..linalg.ell_pcg import EllOverflowError, EllPCG
 from ..linalg.sparse_cg import SparseCGSolver
@@ -688,22 +689,14 @@ class ISPHSolver:
         if len(removed):
             ids = self.ids.to_numpy()[removed]
             self.removed_total += len(removed)
-            if self.cfg.guard.out_of_domain == "error":
-                raise InstabilityError(
-                    f"step {self.step_count}, t = {self.time:.6g} s: {len(removed)} particle(s) left the domain "
-                    f"(ids {ids_text(ids)})", step=self.step_count, time=self.time, quantity="position",
-                    particles=ids)
-            log.warning("step %d, t = %.6g s: removed %d particle(s) that left the domain (ids %s); %d removed so far",
-                        self.step_count, self.time, len(removed), ids_text(ids), self.removed_total)
+            guard.out_of_domain(self.cfg, self.step_count, self.time, ids, self.removed_total)
         for f in self.particle_fields:
             self.grid.reorder(f, self.n)
         self._k_rows()
         try:
             self.grid.build_neighbour_lists(self.x, self.solve_mask, self.n, self.re, self.ids)
         except NeighbourOverflowError as exc:
-            raise InstabilityError(f"step {self.step_count}, t = {self.time:.6g} s: {exc}", step=self.step_count,
-                                   time=self.time, quantity="neighbour count",
-                                   particles=[exc.particle_id]) from None
+            raise guard.neighbour_overflow_error(self.step_count, self.time, exc) from None
 
     def update_porosity(self):
         """eps and D50 of every water particle from the soil markers (eq 32); nothing without soil."""
@@ -735,7 +728,7 @@ class ISPHSolver:
                     f"step {self.step_count + 1}, t = {self.time + dt:.6g} s: a PPE row has {exc.needed} "
                     f"off-diagonal entries but the ELL matrix holds {exc.capacity}; raise the config key "
                     f"`isph.ppe.width` to at least {exc.needed}", step=self.step_count + 1,
-                    time=self.time + dt, quantity="PPE row width") from None
+                    time=self.time + dt, quantity="PPE row width", family="solver") from None
         else:
             self._k_assemble(self.ppe.builder)
             self.ppe.check_triplets(int(self.triplets[None]))
@@ -747,11 +740,8 @@ class ISPHSolver:
             sol, iters, res, ok = self.ppe.solve(b, x0)
         t0 = self._tick("ppe_solve", t0)
         if not ok:
-            msg = (f"step {self.step_count + 1}, t = {self.time + dt:.6g} s: PPE solver did not converge "
-                   f"({iters} iterations, relative residual {res:.3g} > {self.ppe.tolerance:g})")
-            if self.cfg.isph.ppe.on_failure == "error" or not np.isfinite(res):
-                raise InstabilityError(msg, step=self.step_count + 1, time=self.time + dt, quantity="PPE residual")
-            log.warning(msg)
+            guard.solver_failure(self.step_count + 1, self.time + dt, iters, res, self.ppe.tolerance,
+                                 self.cfg.isph.ppe.on_failure)
         if not self.ppe_ell:
             self.psol.from_numpy(sol.astype(self.np_fp))
         self._k_scatter_pressure()
@@ -771,10 +761,8 @@ class ISPHSolver:
                      "cg_iterations": iters, "cg_residual": res, "free_surface": int(d[5]),
                      "collisions": collisions}
         if d[3] > 0:
-            raise InstabilityError(
-                f"step {self.step_count}, t = {self.time:.6g} s: non-finite position, velocity or pressure at "
-                f"{int(d[3])} particle(s) (first id {int(d[4])})", step=self.step_count, time=self.time,
-                quantity="non-finite state", particles=[int(d[4])])
+            raise guard.non_finite_error(self.step_count, self.time, int(d[3]), int(d[4]),
+                                         "position, velocity or pressure")
         return self.last
 
     def initial_diagnostics(self) -> dict:

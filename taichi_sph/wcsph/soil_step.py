@@ -19,7 +19,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from ..errors import InstabilityError
+from .. import guard
 from ..scene import SOIL, WALL, WATER
 from ..sph import kernels
 from . import soil, terms
@@ -262,10 +262,8 @@ class SoilStep:
         r = self.red_soil[None].to_numpy()
         self.red_s = r
         if r[4] > 0:
-            raise InstabilityError(
-                f"step {self.step_count}, t = {self.time:.6g} s: non-finite position, velocity, density or "
-                f"stress at {int(r[4])} soil particle(s) (first id {int(r[5])})", step=self.step_count,
-                time=self.time, quantity="non-finite soil state", particles=[int(r[5])])
+            raise guard.non_finite_error(self.step_count, self.time, int(r[4]), int(r[5]),
+                                         "soil position, velocity, density or stress")
         self.last["kinetic_energy"] += float(r[0])
         self.last["max_speed"] = max(self.last["max_speed"], float(r[1]))
         if self.coupled:

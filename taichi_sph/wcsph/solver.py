@@ -34,8 +34,8 @@ import time as _time
 import numpy as np
 import taichi as ti
 
-from ..backend import ids_text, is_f64
-from ..errors import InstabilityError
+from .. import guard
+from ..backend import is_f64
 from ..scene import AIR, SOIL, WALL, WATER
 from ..sph import kernels, operators
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
@@ -562,13 +562,7 @@ class WCSPHSolver(SoilStep):
         if len(removed):
             ids = self.ids.to_numpy()[removed]
             self.removed_total += len(removed)
-            if self.cfg.guard.out_of_domain == "error":
-                raise InstabilityError(
-                    f"step {self.step_count}, t = {self.time:.6g} s: {len(removed)} particle(s) left the domain "
-                    f"(ids {ids_text(ids)})", step=self.step_count, time=self.time, quantity="position",
-                    particles=ids)
-            log.warning("step %d, t = %.6g s: removed %d particle(s) that left the domain (ids %s); %d removed so far",
-                        self.step_count, self.time, len(removed), ids_text(ids), self.removed_total)
+            guard.out_of_domain(self.cfg, self.step_count, self.time, ids, self.removed_total)
         for f in self.particle_fields:
             self.grid.reorder(f, self.n)
         self._k_mask()
@@ -576,9 +570,7 @@ class WCSPHSolver(SoilStep):
         try:
             self.grid.build_neighbour_lists(self.x, self.fmask, self.n, self.r_list, self.ids)
         except NeighbourOverflowError as exc:
-            raise InstabilityError(f"step {self.step_count}, t = {self.time:.6g} s: {exc}", step=self.step_count,
-                                   time=self.time, quantity="neighbour count",
-                                   particles=[exc.particle_id]) from None
+            raise guard.neighbour_overflow_error(self.step_count, self.time, exc) from None
         self._k_after_build()
         self.rebuilds += 1
 
@@ -591,10 +583,8 @@ class WCSPHSolver(SoilStep):
         self.last = {"kinetic_energy": float(r[0]), "max_speed": float(r[1]), "water_volume": float(r[2]),
                      "air_volume": float(r[8])}
         if r[5] > 0:
-            raise InstabilityError(
-                f"step {self.step_count}, t = {self.time:.6g} s: non-finite position, velocity, density or "
-                f"pressure at {int(r[5])} particle(s) (first id {int(r[6])})", step=self.step_count,
-                time=self.time, quantity="non-finite state", particles=[int(r[6])])
+            raise guard.non_finite_error(self.step_count, self.time, int(r[5]), int(r[6]),
+                                         "position, velocity, density or pressure")
 
     def step(self, dt: float) -> dict:
         t0 = _time.perf_counter()
@@ -642,9 +632,7 @@ class WCSPHSolver(SoilStep):
             limits[DT_FORCE] = min(limits[DT_FORCE], ts.force * math.sqrt(float(rs[2])))
         which = min(limits, key=limits.get)
         if limits[which] < ts.min:
-            raise InstabilityError(
-                f"step {self.step_count}, t = {self.time:.6g} s: the time step of eq 49 fell to {limits[which]:.3g} s, "
-                f"below timestep.min = {ts.min:g} s", step=self.step_count, time=self.time, quantity="time step")
+            raise guard.time_step_error(self.step_count, self.time, limits[which], ts.min, "eq 49")
         return limits[which], which
 
     # ------------------------------------------------------------------ output

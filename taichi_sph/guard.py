@@ -1,0 +1,155 @@
+"""Stability guard shared by both solver modes: one place that decides when a run has gone wrong.
+
+Causes and their families (exit codes in taichi_sph/errors.py):
+- non-finite position, velocity, pressure or density (`nonfinite`, exit 4);
+- speed above guard.max_speed, density ratio rho / rho_ref outside [guard.min_density_ratio,
+  guard.max_density_ratio], neighbour-list overflow (`bounds`, exit 3);
+- pressure solver (CG) diverged or not converged, adaptive time step below timestep.min (`solver`, exit 5);
+- particles leaving the domain when guard.out_of_domain is `error` (else removed, counted, warned),
+  a wall particle that moved (`domain`, exit 6).
+
+Every message has the same shape: "step S, t = T s: <quantity> ... (particle ids ...)". The solvers call the
+`raise_*`/`*_error` helpers at the places they detect a cause inside a step (cheap reductions already in
+their kernels); the driver calls StabilityGuard.after_step every step (speed) and StabilityGuard.check_fields
+every guard.every steps and on every frame (the host-side checks: non-finite, density ratio, walls).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from .backend import ids_text
+from .errors import InstabilityError
+from .scene import AIR, WALL, WATER
+
+log = logging.getLogger("taichi_sph")
+
+#: guard.max_density_ratio when not given, per mode (see the key's documentation)
+DEFAULT_MAX_DENSITY_RATIO = {"wcsph_biot": 1.3, "isph": 3.0}
+#: a wall particle counts as moved beyond this fraction of dx (walls are never integrated: exact zero)
+WALL_TOLERANCE = 1.0e-6
+
+
+def where(step: int, time: float) -> str:
+    return f"step {step}, t = {time:.6g} s"
+
+
+def out_of_domain(cfg, step: int, time: float, ids, removed_total: int) -> None:
+    """Particles the neighbour grid dropped (outside the domain): stop or warn, as guard.out_of_domain says."""
+    ids = [int(i) for i in ids]
+    if cfg.guard.out_of_domain == "error":
+        raise InstabilityError(
+            f"{where(step, time)}: {len(ids)} particle(s) left the domain (guard.out_of_domain: error) "
+            f"(particle ids {ids_text(ids)})", step=step, time=time, quantity="position", particles=ids,
+            family="domain")
+    log.warning("%s: removed %d particle(s) that left the domain (ids %s); %d removed so far",
+                where(step, time), len(ids), ids_text(ids), removed_total)
+
+
+def neighbour_overflow_error(step: int, time: float, exc) -> InstabilityError:
+    return InstabilityError(f"{where(step, time)}: {exc}", step=step, time=time, quantity="neighbour count",
+                            particles=[exc.particle_id], family="bounds")
+
+
+def non_finite_error(step: int, time: float, count: int, first_id: int, what: str) -> InstabilityError:
+    return InstabilityError(
+        f"{where(step, time)}: non-finite {what} at {count} particle(s) (first particle id {first_id})",
+        step=step, time=time, quantity="non-finite state", particles=[first_id], family="nonfinite")
+
+
+def solver_failure(step: int, time: float, iterations: int, residual: float, tolerance: float,
+                   on_failure: str) -> None:
+    """The PPE's CG ended above its tolerance: stop when it diverged (non-finite residual) or when
+    isph.ppe.on_failure is `error`, else warn."""
+    diverged = not math.isfinite(residual)
+    msg = (f"{where(step, time)}: PPE solver {'diverged' if diverged else 'did not converge'} "
+           f"({iterations} iterations, relative residual {residual:.3g} > {tolerance:g})")
+    if on_failure == "error" or diverged:
+        raise InstabilityError(msg, step=step, time=time, quantity="PPE residual", family="solver")
+    log.warning(msg)
+
+
+def time_step_error(step: int, time: float, dt: float, dt_min: float, what: str) -> InstabilityError:
+    return InstabilityError(f"{where(step, time)}: the time step of {what} fell to {dt:.3g} s, below "
+                            f"timestep.min = {dt_min:g} s", step=step, time=time, quantity="time step",
+                            family="solver")
+
+
+class StabilityGuard:
+    """Host-side checks the driver makes; built once per run from the config and the scene's kinds."""
+
+    def __init__(self, cfg, kind: np.ndarray, rho_ref: np.ndarray, speed_bound: float):
+        g = cfg.guard
+        self.every = g.every
+        self.speed_bound = float(speed_bound)
+        self.max_ratio = g.max_density_ratio or DEFAULT_MAX_DENSITY_RATIO[cfg.mode]
+        self.min_ratio = g.min_density_ratio
+        self.kind = np.asarray(kind)
+        self.rho_ref = np.asarray(rho_ref, dtype=float)
+        # density ratio of water and air only (soil has its own density and no such bound here)
+        self.fluid = np.isin(self.kind, (WATER, AIR))
+        self.wall = self.kind == WALL
+        self.wall_tol = WALL_TOLERANCE * cfg.dx
+        self.wall0 = None
+
+    def start(self, fields: dict) -> None:
+        """Remember where the walls are at t = 0."""
+        self.wall0 = np.array(fields["position"][self.wall], dtype=float)
+
+    def due(self, step: int) -> bool:
+        return step % self.every == 0
+
+    def after_step(self, step: int, time: float, diag: dict, fastest) -> None:
+        """Per-step check from the solver's reductions: the speed bound (`fastest()` gives the particle id)."""
+        speed = diag["max_speed"]
+        if not speed <= self.speed_bound:  # NaN fails too
+            pid = fastest()
+            raise InstabilityError(
+                f"{where(step, time)}: speed {speed:.4g} m/s exceeds the bound {self.speed_bound:.4g} m/s "
+                f"(guard.max_speed) at particle id {pid}", step=step, time=time, quantity="speed", particles=[pid],
+                family="bounds" if math.isfinite(speed) else "nonfinite")
+
+    def check_fields(self, step: int, time: float, fields: dict) -> None:
+        """Non-finite state, density ratio of fluid particles, walls at rest (fields in id order)."""
+        active = np.asarray(fields["active"], dtype=bool)
+        bad = np.zeros(len(active), dtype=bool)
+        for name in ("position", "velocity", "pressure", "density"):
+            a = np.asarray(fields[name], dtype=float)
+            bad |= ~np.isfinite(a.reshape(len(a), -1)).all(axis=1)
+        bad &= active
+        if bad.any():
+            ids = np.flatnonzero(bad)
+            raise InstabilityError(
+                f"{where(step, time)}: non-finite position, velocity, pressure or density at {len(ids)} particle(s) "
+                f"(particle ids {ids_text(ids)})", step=step, time=time, quantity="non-finite state",
+                particles=ids, family="nonfinite")
+        ratio = np.asarray(fields["density"], dtype=float) / self.rho_ref
+        check = active & self.fluid
+        for bound, over, name in ((self.max_ratio, ratio > (self.max_ratio or np.inf), "max_density_ratio"),
+                                  (self.min_ratio, ratio < (self.min_ratio or -np.inf), "min_density_ratio")):
+            hit = over & check
+            if bound is not None and hit.any():
+                ids = np.flatnonzero(hit)
+                worst = ids[np.argmax(np.abs(ratio[ids] - 1.0))]
+                raise InstabilityError(
+                    f"{where(step, time)}: density ratio {ratio[worst]:.4g} beyond the bound {bound:g} "
+                    f"(guard.{name}) at {len(ids)} particle(s) (particle ids {ids_text(ids)})", step=step,
+                    time=time, quantity="density ratio", particles=ids, family="bounds")
+        if self.wall0 is not None and len(self.wall0):
+            moved = np.abs(np.asarray(fields["position"])[self.wall] - self.wall0).max(axis=1) > self.wall_tol
+            if moved.any():
+                ids = np.flatnonzero(self.wall)[moved]
+                raise InstabilityError(
+                    f"{where(step, time)}: {len(ids)} wall particle(s) moved (particle ids {ids_text(ids)})",
+                    step=step, time=time, quantity="wall position", particles=ids, family="domain")
+
+
+def flag_field(n: int, ids=()) -> np.ndarray:
+    """The frame field `flag`: 1 at the particles (ids) that stopped the run, else 0."""
+    flag = np.zeros(n, dtype=np.int8)
+    ids = [int(i) for i in ids if 0 <= int(i) < n]
+    flag[ids] = 1
+    return flag

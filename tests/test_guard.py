@@ -1,0 +1,145 @@
+"""Stability guard: each cause named with its family's exit code; a run 10x past its time-step limit stops
+with the named cause and leaves a readable run file whose last frame flags the offending particles."""
+
+import re
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from taichi_sph.errors import EXIT_BY_FAMILY, InstabilityError
+from taichi_sph.guard import StabilityGuard, flag_field, out_of_domain, solver_failure
+from taichi_sph.io.hdf5 import RunFile
+
+KIND = np.array([0, 0, 0, 1, 1, 3])  # water, water, water, wall, wall, air
+RHO_REF = np.array([1000.0, 1000.0, 1000.0, 1000.0, 1000.0, 1.2])
+
+
+def _cfg(**guard):
+    g = {"every": 1, "max_density_ratio": 1.5, "min_density_ratio": None, "out_of_domain": "remove"} | guard
+    return SimpleNamespace(dx=0.01, mode="isph", guard=SimpleNamespace(**g))
+
+
+def _fields(n=6):
+    pos = np.arange(2 * n, dtype=float).reshape(n, 2) * 0.01
+    return {"position": pos, "velocity": np.zeros((n, 2)), "pressure": np.zeros(n),
+            "density": RHO_REF[:n].copy(), "active": np.ones(n, dtype=bool)}
+
+
+def _guard(**kw):
+    g = StabilityGuard(_cfg(**kw), KIND, RHO_REF, speed_bound=5.0)
+    g.start(_fields())
+    return g
+
+
+def _raised(fn) -> InstabilityError:
+    with pytest.raises(InstabilityError) as info:
+        fn()
+    return info.value
+
+
+def test_quiet_state_passes():
+    f = _fields()
+    assert f["density"][5] == 1.2  # air at its own reference density: ratio 1
+    _guard().check_fields(7, 0.1, f)
+
+
+def test_non_finite_names_particles_and_exits_4():
+    f = _fields()
+    f["velocity"][2, 1] = np.nan
+    f["pressure"][4] = np.inf
+    exc = _raised(lambda: _guard().check_fields(7, 0.1, f))
+    assert exc.exit_code == 4 and exc.family == "nonfinite"
+    assert exc.particles == [2, 4]
+    assert str(exc).startswith("step 7, t = 0.1 s: non-finite")
+
+
+def test_density_ratio_bounds_exit_3():
+    f = _fields()
+    f["density"][1] = 1600.0
+    exc = _raised(lambda: _guard().check_fields(3, 0.2, f))
+    assert exc.exit_code == 3 and exc.quantity == "density ratio" and exc.particles == [1]
+    assert "1.6" in str(exc) and "guard.max_density_ratio" in str(exc)
+    # a wall particle's density is never checked; an inactive (removed) particle neither
+    f = _fields()
+    f["density"][3] = 5000.0
+    g = StabilityGuard(_cfg(), np.array([0, 0, 0, 1, 2, 3]), RHO_REF, speed_bound=5.0)  # particle 4 soil
+    f4 = _fields()
+    f4["density"][4] = 2650.0
+    g.check_fields(3, 0.2, f4)
+    f["density"][0], f["active"][0] = 5000.0, False
+    _guard().check_fields(3, 0.2, f)
+    # the lower bound is off unless set
+    f = _fields()
+    f["density"][0] = 400.0
+    _guard().check_fields(3, 0.2, f)
+    exc = _raised(lambda: _guard(min_density_ratio=0.5).check_fields(3, 0.2, f))
+    assert exc.particles == [0] and "guard.min_density_ratio" in str(exc)
+
+
+def test_moving_wall_exits_6():
+    f = _fields()
+    f["position"][4, 0] += 1e-3  # 0.1 dx
+    exc = _raised(lambda: _guard().check_fields(9, 0.3, f))
+    assert exc.exit_code == 6 and exc.quantity == "wall position" and exc.particles == [4]
+
+
+def test_speed_bound_and_nan_speed():
+    g = _guard()
+    g.after_step(1, 0.01, {"max_speed": 4.9}, lambda: 0)
+    exc = _raised(lambda: g.after_step(1, 0.01, {"max_speed": 6.0}, lambda: 2))
+    assert exc.exit_code == 3 and exc.particles == [2] and "particle id 2" in str(exc)
+    exc = _raised(lambda: g.after_step(1, 0.01, {"max_speed": float("nan")}, lambda: 2))
+    assert exc.exit_code == 4
+
+
+def test_out_of_domain_remove_or_error():
+    out_of_domain(_cfg(), 5, 0.5, [8, 9], 2)  # remove: a warning only
+    exc = _raised(lambda: out_of_domain(_cfg(out_of_domain="error"), 5, 0.5, [8, 9], 2))
+    assert exc.exit_code == 6 and exc.particles == [8, 9] and "particle ids 8, 9" in str(exc)
+
+
+def test_solver_failure():
+    solver_failure(4, 0.04, 50, 1e-3, 1e-6, "warn")  # not converged, finite: a warning
+    exc = _raised(lambda: solver_failure(4, 0.04, 50, float("nan"), 1e-6, "warn"))
+    assert exc.exit_code == 5 and "diverged" in str(exc)
+    exc = _raised(lambda: solver_failure(4, 0.04, 50, 1e-3, 1e-6, "error"))
+    assert exc.exit_code == 5 and "did not converge" in str(exc)
+
+
+def test_exit_codes_distinct_and_flag():
+    assert len(set(EXIT_BY_FAMILY.values())) == len(EXIT_BY_FAMILY)
+    assert 2 not in EXIT_BY_FAMILY.values()  # 2 is bad input
+    np.testing.assert_array_equal(flag_field(5, [1, 3]), [0, 1, 0, 1, 0])
+
+
+@pytest.mark.parametrize("case", [
+    # wcsph dam break: eq 49's coefficients 10x their defaults (0.25). Measured: stops at step 10 with the
+    # density ratio 1.56 > 1.3. (Mode isph survives a fixed dt 10x its CFL limit on this dam break, its
+    # projection being implicit: see docs/stability.md, so it has no case here.)
+    ("configs/dambreak_wcsph.yaml", ["dx=0.05", "end_time=0.3", "timestep.cfl=2.5", "timestep.force=2.5"]),
+])
+def test_dt_ten_times_the_limit_stops_named(run_cli, tmp_path, case):
+    config, sets = case
+    out = tmp_path / "u.h5"
+    args = ["--config", config, "--out", out, "--no-progress", "--set", "output.every=0.02"]
+    for s in sets:
+        args += ["--set", s]
+    proc = run_cli(*args, timeout=300)
+    assert proc.returncode in (3, 4, 5, 6), (proc.returncode, proc.stderr)
+    assert "Traceback" not in proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("taichi-sph: unstable:")]
+    assert len(lines) == 1, proc.stderr
+    m = re.search(r"step (\d+), t = ([0-9.e-]+) s: (.+?) (?:at|beyond|exceeds|\()", lines[0])
+    assert m, lines[0]
+    with RunFile(out) as rf:
+        assert rf.attrs["status"] == "unstable"
+        assert rf.attrs["exit_code"] == proc.returncode
+        ids = np.asarray(rf.attrs["unstable_particles"])
+        assert len(ids) >= 1
+        n = rf.n_frames
+        assert n >= 2  # frame 0 and the state that stopped the run
+        last = rf.frame(n - 1)
+        assert np.flatnonzero(last["flag"]).tolist() == sorted(ids.tolist())  # the named particles, flagged
+        assert not rf.frame(0)["flag"].any()
+        assert abs(rf.times[-1] - float(m.group(2))) < 1e-6

@@ -1,0 +1,575 @@
+"""Validation suite: each case at three or more resolutions, its error against a reference, the observed
+order of convergence and the wall time; writes docs/validation.md, docs/validation.json and one
+work-precision picture per case (error against wall time, log-log, one line per solver variant).
+
+    python tools/validate.py --small            # end to end in minutes on a 2-core CPU
+    python tools/validate.py --full             # the resolutions of the accuracy targets (hours)
+    python tools/validate.py --small --case hydrostatic --case darcy_column
+
+Cases are plain functions registered with @case; a case returns Runs (one config + overrides each) and
+an `evaluate(run_file) -> metrics` function whose "error" entry is the case's error. Cases whose physics
+is not in this version are registered with pending(...) and listed as such. Every run goes through the
+command line (`python -m taichi_sph.cli`), one process each, so a run that goes unstable is reported with
+its cause and does not stop the suite.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "tests" / "data"
+G = 9.81
+RHO = 1000.0
+
+
+# ------------------------------------------------------------------------------------------- registry
+@dataclass
+class Run:
+    """One simulation of a case: config, overrides, the variant (one line in the plot) and dx."""
+
+    variant: str
+    dx: float
+    config: str
+    sets: list[str] = field(default_factory=list)
+    args: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Case:
+    name: str
+    title: str
+    reference: str
+    target: str
+    target_value: float | None  # error bound of SPEC 7 at the finest resolution (None: no number)
+    build: Callable[[str], tuple[list[Run], Callable[[Path, Run], dict]]] | None = None
+    pending: str = ""  # why the case cannot run in this version
+    secondary: dict = field(default_factory=dict)  # other SPEC 7 bounds: metric name -> bound on |value|
+
+
+CASES: dict[str, Case] = {}
+
+
+def case(name: str, title: str, reference: str, target: str, target_value: float | None, secondary=None):
+    """Register a case: decorate a function setting -> (runs, evaluate)."""
+
+    def deco(fn):
+        CASES[name] = Case(name, title, reference, target, target_value, build=fn, secondary=secondary or {})
+        return fn
+
+    return deco
+
+
+def pending(name: str, title: str, reference: str, target: str, why: str) -> None:
+    """Register a case whose physics is not in this version yet (listed in the report as pending)."""
+    CASES[name] = Case(name, title, reference, target, None, pending=why)
+
+
+# ------------------------------------------------------------------------------------------- helpers
+def _read_csv(name: str) -> np.ndarray:
+    rows = [line.strip().split(",") for line in (DATA / f"{name}.csv").read_text().splitlines()
+            if line.strip() and not line.startswith("#") and not line.startswith("T")]
+    return np.array(rows, float)
+
+
+def _floor_pressure(rf, i: int) -> float:
+    """Pressure of the bottom row extrapolated hydrostatically to the tank floor."""
+    f = rf.frame(i)
+    water = (rf.kind == 0) & f["active"]
+    z = f["position"][water][:, -1]
+    p = f["pressure"][water]
+    bottom = z < z.min() + 0.5 * rf.dx
+    return float(np.mean(p[bottom] + RHO * G * z[bottom]))
+
+
+def _fronts(rf, a: float):
+    water = rf.kind == 0
+    T = rf.times * math.sqrt(2 * G / a)
+    Z = np.array([rf.field("position", i)[water & rf.field("active", i)][:, 0].max() / a
+                  for i in range(rf.n_frames)])
+    return T, Z
+
+
+# ------------------------------------------------------------------------------------------- cases
+HYDRO_H = 0.30
+
+
+@case("hydrostatic", "Hydrostatic tank (2D), both modes", "P = rho g H at the floor",
+      "floor pressure within 1 % at 40 particles over the depth; speed < 1e-3 sqrt(g H) after 5 s", 0.01,
+      secondary={"speed/sqrt(gH)": 1e-3})
+def _hydrostatic(setting):
+    # depths whose spacing also divides the tank width (0.4 m) and the water depth (0.3 m)
+    depths = (12, 24, 36) if setting == "small" else (12, 24, 48, 96)
+    end = 0.5 if setting == "small" else 5.0
+    runs = []
+    for mode in ("isph", "wcsph_biot"):
+        for n in depths:
+            dx = HYDRO_H / n
+            sets = [f"mode={mode}", f"dx={dx:.6g}", f"end_time={end}", f"output.every={end / 5:g}"]
+            if mode == "isph":
+                sets.append(f"dt={min(0.001, 0.1 * dx):.6g}")
+            runs.append(Run(mode, dx, "configs/hydrostatic.yaml", sets))
+
+    def evaluate(path, run):
+        from taichi_sph.io.hdf5 import RunFile
+
+        with RunFile(path) as rf:
+            p = _floor_pressure(rf, rf.n_frames - 1)
+            d = rf.diagnostics()
+            late = d["time"] >= 0.5 * d["time"][-1]
+            speed = float(d["max_speed"][late].max()) / math.sqrt(G * HYDRO_H)
+            drift = float(d["water_volume"][-1] / d["water_volume"][0] - 1)
+        return {"error": abs(p / (RHO * G * HYDRO_H) - 1), "speed/sqrt(gH)": speed, "volume drift": drift}
+
+    return runs, evaluate
+
+
+DAM_A = {"isph": 0.1, "wcsph_biot": 1.0}
+DAM_CONFIG = {"isph": "configs/dambreak.yaml", "wcsph_biot": "configs/dambreak_wcsph.yaml"}
+
+
+@case("dambreak", "Dam break (2D) surge front, both modes", "Martin & Moyce (1952), column a x 2a, n^2 = 2",
+      "front within 5 % for T in [1, 3]", 0.05)
+def _dambreak(setting):
+    ratios = (10, 15, 20) if setting == "small" else (10, 20, 40, 80)
+    runs = []
+    for mode, a in DAM_A.items():
+        end = 3.05 / math.sqrt(2 * G / a)
+        for n in ratios:
+            dx = a / n
+            runs.append(Run(mode, dx, DAM_CONFIG[mode], [f"dx={dx:.6g}", f"end_time={end:.4g}",
+                                                         f"output.every={end / 40:.4g}"]))
+
+    def evaluate(path, run):
+        from taichi_sph.io.hdf5 import RunFile
+
+        a = DAM_A[run.variant]
+        with RunFile(path) as rf:
+            T, Z = _fronts(rf, a)
+        errs = []
+        for name in ("martin_moyce_a1.125in_n2sq2", "martin_moyce_a2.25in_n2sq2"):
+            ref = _read_csv(name)
+            sel = (ref[:, 0] >= 1.0) & (ref[:, 0] <= 3.0) & (ref[:, 0] <= T[-1])
+            errs.append(np.interp(ref[sel, 0], T, Z) / ref[sel, 1] - 1)
+        e = np.concatenate(errs)
+        # the error of a resolution: the mean absolute deviation over both series; the worst point too
+        return {"error": float(np.mean(np.abs(e))), "worst point": float(np.max(np.abs(e)))}
+
+    return runs, evaluate
+
+
+@case("darcy_column", "Darcy/Forchheimer column (2D, isph)", "terminal vD: a vD + b vD^2 = g / eps",
+      "terminal velocity within 1 %", 0.01)
+def _darcy(setting):
+    dxs = (0.02, 0.01, 0.005) if setting == "small" else (0.02, 0.01, 0.005, 0.0025)
+    runs = [Run("isph", dx, "configs/darcy_column.yaml", [f"dx={dx:g}", "output.every=0.05"]) for dx in dxs]
+
+    def evaluate(path, run):
+        from taichi_sph.io.hdf5 import RunFile
+        from taichi_sph.isph.porosity import terminal_darcy_velocity
+
+        vt = terminal_darcy_velocity(0.4, 1.0e-6, 0.002)
+        with RunFile(path) as rf:
+            f = rf.frame(-1)
+            w = (rf.kind == 0) & f["active"]
+            z = f["position"][w][:, -1]
+            core = (z > np.percentile(z, 20)) & (z < np.percentile(z, 80))
+            vz = -f["velocity"][w][core, -1]
+        return {"error": abs(float(vz.mean()) / vt - 1), "spread": float(vz.std() / vt)}
+
+    return runs, evaluate
+
+
+FREEFALL_ARRIVAL = {0.3: 0.42, 0.5: 0.34, 0.8: 0.26}  # seed 000 section 5, s
+FREEFALL_VARIANT = {0.3: "", 0.5: "eps05", 0.8: "eps08"}  # variants of configs/freefall.yaml
+LAYER = (0.2, 0.4)  # porous layer of configs/freefall.yaml, m
+
+
+@case("freefall", "Seed free fall into a porous layer (3D, isph)",
+      "seed 000 section 5: arrival at the layer bottom 0.42 / 0.34 / 0.26 s for eps0 0.3 / 0.5 / 0.8",
+      "arrival within 10 %; fraction in the layer within 0.05 of eps0; volume drift < 0.5 % over 2.5 s "
+      "with alpha = 0.01", 0.10, secondary={"fraction - eps0": 0.05, "volume drift": 0.005})
+def _freefall(setting):
+    if setting == "small":
+        dxs, eps_list, alphas, end = (0.04, 0.0286, 0.02), (0.5,), (0.01, 0.0), 0.6
+    else:
+        dxs, eps_list, alphas, end = (0.02, 0.0143, 0.01), (0.3, 0.5, 0.8), (0.01, 0.0), 2.5
+    runs = []
+    for eps0 in eps_list:
+        for alpha in alphas:
+            for dx in dxs:
+                sets = [f"dx={dx:g}", f"dt={0.1 * dx:.4g}", f"end_time={end}", "output.every=0.01",
+                        f"isph.alpha={alpha}"]
+                args = ["--variant", FREEFALL_VARIANT[eps0]] if FREEFALL_VARIANT[eps0] else []
+                runs.append(Run(f"eps0 {eps0}, alpha {alpha}", dx, "configs/freefall.yaml", sets, args))
+
+    def evaluate(path, run):
+        from taichi_sph.io.hdf5 import RunFile
+
+        eps0 = float(run.variant.split(",")[0].split()[1])
+        with RunFile(path) as rf:
+            water = rf.kind == 0
+            t = rf.times
+            zmin = np.array([rf.field("position", i)[water & rf.field("active", i)][:, -1].min()
+                             for i in range(rf.n_frames)])
+            # arrival: the lowest water particle centre reaches half a spacing above the layer bottom
+            hit = np.flatnonzero(zmin <= LAYER[0] + 0.5 * rf.dx)
+            arrival = float(t[hit[0]]) if len(hit) else float("nan")
+            frac = float("nan")
+            if len(hit):
+                z = rf.field("position", int(hit[0]))[water][:, -1]
+                frac = float(np.mean((z >= LAYER[0]) & (z <= LAYER[1])))
+            d = rf.diagnostics()
+            drift = float(d["water_volume"][-1] / d["water_volume"][0] - 1)
+        ref = FREEFALL_ARRIVAL[eps0]
+        return {"error": abs(arrival / ref - 1) if np.isfinite(arrival) else float("inf"), "arrival s": arrival,
+                "fraction in layer": frac, "fraction - eps0": frac - eps0, "volume drift": drift}
+
+    return runs, evaluate
+
+
+CHANNEL_L, CHANNEL_NU = 0.02, 1.0e-3  # configs/channel_startup.yaml: channel width (m), viscosity (m^2/s)
+
+
+def channel_startup_velocity(x, t, L=CHANNEL_L, nu=CHANNEL_NU, g=G, terms=200):
+    """Start-up of plane Poiseuille flow driven by gravity from rest, u = 0 at x = 0 and L:
+    u = g x (L - x) / (2 nu) - sum_{n odd} 4 g L^2 / (nu pi^3 n^3) sin(n pi x / L) exp(-nu n^2 pi^2 t / L^2)."""
+    x = np.asarray(x, float)
+    u = g / (2 * nu) * x * (L - x)
+    for n in range(1, 2 * terms, 2):
+        u -= 4 * g * L**2 / (nu * math.pi**3 * n**3) * np.sin(n * math.pi * x / L) * math.exp(
+            -nu * n * n * math.pi**2 * t / L**2)
+    return u
+
+
+@case("channel_startup", "Start-up of gravity-driven plane Poiseuille flow (2D), both modes",
+      "series solution of u_t = g + nu u_xx, u = 0 at the walls (a free slab falling between no-slip walls; "
+      "no periodic boundaries needed)", "none in SPEC 7 (viscosity and wall accuracy)", None)
+def _channel(setting):
+    dxs = (0.004, 0.002, 0.001) if setting == "small" else (0.002, 0.001, 0.0005, 0.00025)
+    runs = [Run(mode, dx, "configs/channel_startup.yaml", [f"mode={mode}", f"dx={dx:g}"])
+            for mode in ("isph", "wcsph_biot") for dx in dxs]
+
+    def evaluate(path, run):
+        from taichi_sph.io.hdf5 import RunFile
+
+        u_ss = G * CHANNEL_L**2 / (8 * CHANNEL_NU)
+        with RunFile(path) as rf:
+            f = rf.frame(-1)
+            t = float(rf.times[-1])
+            w = (rf.kind == 0) & f["active"]
+            x = f["position"][w]
+            # the slab's middle, away from its free ends by one channel width
+            band = np.abs(x[:, -1] - np.median(x[:, -1])) < CHANNEL_L
+            u = -f["velocity"][w][band, -1]
+            ue = channel_startup_velocity(x[band, 0], t)
+        return {"error": float(np.sqrt(np.mean((u - ue) ** 2)) / u_ss),
+                "centre u / exact": float(u.max() / ue.max())}
+
+    return runs, evaluate
+
+
+pending("taylor_green", "Taylor-Green vortex decay", "decay exp(-2 nu k^2 t)", "none in SPEC 7",
+        "needs periodic boundaries (the neighbour grid and both solvers use plain differences x_i - x_j) and an "
+        "initial velocity field in the config, neither of which this version has; viscosity and walls are "
+        "validated without periodicity by channel_startup")
+for _name, _title, _ref, _target in (
+        ("terzaghi", "Terzaghi consolidation (wcsph_biot)", "1D series solution, double drainage",
+         "isochrones within 3 %"),
+        ("critical_gradient", "Upward seepage, critical gradient (wcsph_biot)", "(Gs - 1) / (1 + e)",
+         "bracketed within 10 %"),
+        ("dupuit", "Dupuit seepage discharge (wcsph_biot)", "q = k (h1^2 - h2^2) / (2 L)", "within 10 %")):
+    pending(_name, _title, _ref, _target, "needs the soil phase of mode wcsph_biot (being added); register the "
+            "case with @case once soil particles exist")
+
+
+# ------------------------------------------------------------------------------------------- running
+def run_one(run: Run, workdir: Path, timeout: float) -> dict:
+    out = workdir / f"{abs(hash((run.variant, run.dx, tuple(run.sets)))):x}.h5"
+    cmd = [sys.executable, "-m", "taichi_sph.cli", "--config", run.config, "--out", str(out), "--no-progress",
+           "--quiet", *run.args]
+    for s in run.sets:
+        cmd += ["--set", s]
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False)
+        rc, err = proc.returncode, proc.stderr
+    except subprocess.TimeoutExpired:
+        rc, err = -1, f"timed out after {timeout:g} s"
+    wall = time.perf_counter() - t0
+    row = {"variant": run.variant, "dx": run.dx, "rc": rc, "process_seconds": wall, "out": str(out)}
+    lines = [ln for ln in err.splitlines() if ln.startswith("taichi-sph: ")]
+    if rc != 0:
+        row["status"] = lines[-1].removeprefix("taichi-sph: ") if lines else err.strip()[-300:]
+    else:
+        row["status"] = "completed"
+    if out.exists():
+        try:
+            from taichi_sph.io.hdf5 import RunFile
+
+            with RunFile(out) as rf:
+                row["step_seconds"] = float(rf.attrs.get("step_seconds", float("nan")))
+                row["steps"] = int(rf.attrs.get("steps", 0))
+                row["n_particles"] = int(rf.n_particles)
+        except Exception as exc:  # noqa: BLE001  (an unreadable file is reported, not fatal)
+            row["status"] += f"; run file unreadable: {exc}"
+    return row
+
+
+def observed_orders(dx, err):
+    """Order between consecutive resolutions, log(e1/e2) / log(dx1/dx2), and the least-squares slope."""
+    dx, err = np.asarray(dx, float), np.asarray(err, float)
+    ok = np.isfinite(err) & (err > 0)
+    pair = [float(math.log(err[i] / err[i + 1]) / math.log(dx[i] / dx[i + 1])) if ok[i] and ok[i + 1]
+            else float("nan") for i in range(len(dx) - 1)]
+    fit = float(np.polyfit(np.log(dx[ok]), np.log(err[ok]), 1)[0]) if ok.sum() >= 2 else float("nan")
+    return pair, fit
+
+
+def run_case(c: Case, setting: str, workdir: Path, timeout: float, log) -> dict:
+    rows = []
+    runs, evaluate = c.build(setting)
+    for run in runs:
+        row = run_one(run, workdir, timeout)
+        row["sets"] = run.sets
+        if row["rc"] == 0:
+            try:
+                row.update(evaluate(Path(row["out"]), run))
+            except Exception as exc:  # noqa: BLE001
+                row["status"] = f"evaluation failed: {exc}"
+        row.setdefault("error", float("nan"))
+        log(f"  {c.name} [{run.variant}] dx={run.dx:.4g}: error {row['error']:.4g}, "
+            f"{row['process_seconds']:.1f} s, {row['status']}")
+        Path(row.pop("out")).unlink(missing_ok=True)
+        rows.append(row)
+    variants = {}
+    for r in rows:
+        variants.setdefault(r["variant"], []).append(r)
+    summary = {}
+    for v, rs in variants.items():
+        rs.sort(key=lambda r: -r["dx"])
+        pair, fit = observed_orders([r["dx"] for r in rs], [r["error"] for r in rs])
+        summary[v] = {"orders": pair, "fitted_order": fit, "finest_error": rs[-1]["error"]}
+    return {"rows": rows, "variants": summary}
+
+
+# ------------------------------------------------------------------------------------------- report
+def _fmt(x, spec=".3g"):
+    if isinstance(x, float):
+        if math.isnan(x):
+            return "n/a"
+        return format(x, spec)
+    return str(x)
+
+
+def plot_case(c: Case, result: dict, img_dir: Path) -> str | None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    drawn = False
+    for v in result["variants"]:
+        rs = [r for r in result["rows"] if r["variant"] == v and np.isfinite(r["error"]) and r["error"] > 0]
+        if not rs:
+            continue
+        w = [r.get("step_seconds", r["process_seconds"]) or r["process_seconds"] for r in rs]
+        e = [r["error"] for r in rs]
+        ax.loglog(w, e, "o-", label=v)
+        for wi, ei, r in zip(w, e, rs):
+            ax.annotate(f"dx {r['dx']:.3g}", (wi, ei), fontsize=7, textcoords="offset points", xytext=(3, 3))
+        drawn = True
+    if not drawn:
+        plt.close(fig)
+        return None
+    if c.target_value is not None:
+        ax.axhline(c.target_value, color="grey", ls="--", lw=0.8, label="SPEC 7 target")
+    ax.set_xlabel("wall time of the time steps (s), 2-core CPU")
+    ax.set_ylabel("error")
+    ax.set_title(c.title, fontsize=9)
+    ax.legend(fontsize=7)
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    name = f"validation_{c.name}.png"
+    fig.savefig(img_dir / name, dpi=110)
+    plt.close(fig)
+    return name
+
+
+DIAGNOSES = {
+    "channel_startup": "mode wcsph_biot stays near 3 % of the steady centre speed at every resolution tried (its "
+                       "centre runs ahead of the series); the source, not one of dx, is not yet identified.",
+    "hydrostatic": "the floor pressure is extrapolated from the bottom row of particles; the surface of a "
+                   "particle method sits O(dx) off the true one (isph: half-layer surface pressure; wcsph: "
+                   "eq 27 normalisation averages the bottom rows), so the error falls about as dx. The small "
+                   "setting runs 0.5 s, where the start-up transient still moves the water (the speed bound is "
+                   "meant after 5 s: the full setting).",
+    "dambreak": "the experiment's front lags at early T while the gate is pulled (the simulation releases "
+                "instantly), so the error does not go to zero with dx; the remaining error is that of the "
+                "leading particle's position (~dx / a). Mode wcsph_biot leads the experiment by 11-18 % at "
+                "every resolution tried (see docs/wcsph.md): the error is not one of resolution.",
+    "darcy_column": "the slab's core velocity carries the SPH gradient of the uniform surface pressure at "
+                    "the slab's two free surfaces.",
+    "freefall": "the small setting runs 2-4 cm particles where the seed ran 1 cm: the 20 cm layer is then 5-10 "
+                "particles thick and the water front a few particles, so the arrival (lowest particle centre "
+                "within dx/2 of the layer bottom, frames every 0.01 s) and the fraction in the layer move by "
+                "O(dx) from one resolution to the next; the full setting runs 2, 1.43 and 1 cm for all three "
+                "eps0. Volume drift over 0.6 s only (the target is over 2.5 s). When this was written the "
+                "alpha = 0.01 runs arrived later as dx fell (0.41, 0.42, 0.48 s) while the alpha = 0 runs "
+                "converged towards the seed (0.49, 0.43, 0.38 s): the PPE's density-error term slows the "
+                "drainage into the layer at these resolutions; the full setting shows whether that persists.",
+}
+
+
+def write_report(results: dict, setting: str, elapsed: float, machine: str, path_md: Path, img_dir: Path):
+    lines = ["# Validation", "",
+             (f"Produced by `python tools/validate.py --{setting}` ({setting} setting) on {machine}; "
+             f"{elapsed / 60:.1f} min in all. Each row is one run through the command line; the wall time is "
+             "that of the time steps (compilation and start-up excluded), the process time includes them. "
+             "The observed order is log(e1/e2)/log(dx1/dx2) between consecutive resolutions and the "
+             "least-squares slope over all of them. Targets are those of the specification (section 7) at "
+             "the finest resolution the full setting runs; the small setting runs coarser and shorter."),
+             "", ("Exit codes of a run that stops (docs in `taichi_sph/errors.py`): 3 bounds, 4 non-finite, "
+             "5 solver, 6 domain."), ""]
+    lines += ["## Summary", "", "| case | variant | finest dx | error at finest | target | order (fit) | verdict |",
+              "|---|---|---|---|---|---|---|"]
+    for name, res in results.items():
+        c = CASES[name]
+        if c.pending:
+            lines.append(f"| {name} | - | - | - | {c.target} | - | pending: {c.pending} |")
+            continue
+        for v, s in res["variants"].items():
+            finest = min(r["dx"] for r in res["rows"] if r["variant"] == v)
+            e = s["finest_error"]
+            if c.target_value is None or not np.isfinite(e):
+                verdict = "no SPEC target" if np.isfinite(e) else "failed (see rows)"
+            else:
+                verdict = "meets target" if e <= c.target_value else "ABOVE target (diagnosis below)"
+            order = s["fitted_order"]
+            if np.isfinite(order) and order <= 0:
+                verdict += "; order not positive"
+            tv = f"{c.target_value:g}" if c.target_value is not None else "-"
+            lines.append(f"| {name} | {v} | {finest:.4g} | {_fmt(e)} | {tv} | {_fmt(order, '.2f')} | {verdict} |")
+    lines.append("")
+    for name, res in results.items():
+        c = CASES[name]
+        lines += [f"## {c.title}", "", f"Reference: {c.reference}. Target: {c.target}.", ""]
+        if c.pending:
+            lines += [f"Pending: {c.pending}.", ""]
+            continue
+        extra = sorted({k for r in res["rows"] for k in r if k not in (
+            "variant", "dx", "rc", "process_seconds", "status", "sets", "error", "step_seconds", "steps",
+            "n_particles")})
+        lines.append("| variant | dx | particles | steps | error | " + " | ".join(extra)
+                     + " | step wall s | process s | status |")
+        lines.append("|" + "---|" * (8 + len(extra)))
+        for r in res["rows"]:
+            lines.append(f"| {r['variant']} | {r['dx']:.4g} | {r.get('n_particles', '')} | {r.get('steps', '')} | "
+                         f"{_fmt(r['error'])} | " + " | ".join(_fmt(r.get(k, float("nan"))) for k in extra)
+                         + f" | {_fmt(r.get('step_seconds', float('nan')), '.1f')} | {r['process_seconds']:.1f} | "
+                         f"{r['status']} |")
+        lines.append("")
+        for v, s in res["variants"].items():
+            lines.append(f"- {v}: orders between resolutions {', '.join(_fmt(o, '.2f') for o in s['orders'])}; "
+                         f"fitted {_fmt(s['fitted_order'], '.2f')}")
+        any_over = False
+        for v in res["variants"]:
+            finest = min((r for r in res["rows"] if r["variant"] == v), key=lambda r: r["dx"])
+            over = [f"{k} = {_fmt(finest.get(k, float('nan')))} (bound {b:g})" for k, b in c.secondary.items()
+                    if not abs(finest.get(k, float("nan"))) <= b]
+            if over:
+                any_over = True
+                lines.append(f"- {v}, finest dx: above the other SPEC 7 bounds: {'; '.join(over)}")
+        above = [v for v, s in res["variants"].items() if c.target_value is not None
+                 and not (s["finest_error"] <= c.target_value)]
+        bad_order = [v for v, s in res["variants"].items() if not (s["fitted_order"] > 0)]
+        if above or bad_order or any_over:
+            which = sorted(set(above + bad_order)) or list(res["variants"])
+            lines.append(f"- Diagnosis ({'; '.join(which)}): {DIAGNOSES.get(name, '')}")
+        if res.get("image"):
+            lines += ["", f"![{c.title}](img/{res['image']})"]
+        lines.append("")
+    path_md.write_text("\n".join(lines))
+
+
+def machine_text() -> str:
+    try:
+        sys.path.insert(0, str(ROOT / "tools"))
+        from bench import machine
+
+        return machine()
+    except Exception:  # noqa: BLE001
+        return f"{os.cpu_count()}-core CPU"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    g = ap.add_mutually_exclusive_group()
+    g.add_argument("--small", action="store_const", const="small", dest="setting")
+    g.add_argument("--full", action="store_const", const="full", dest="setting")
+    ap.add_argument("--case", action="append", help="run only these cases (repeatable)")
+    ap.add_argument("--out", default=str(ROOT / "docs" / "validation.md"))
+    ap.add_argument("--timeout", type=float, default=3600.0, help="seconds per run")
+    ap.add_argument("--list", action="store_true", help="list the cases and exit")
+    ap.add_argument("--report-only", action="store_true",
+                    help="rewrite the report and plots from the JSON beside --out without running")
+    args = ap.parse_args(argv)
+    setting = args.setting or "small"
+    if args.report_only:
+        out_md = Path(args.out)
+        data = json.loads(out_md.with_suffix(".json").read_text())
+        results = data["cases"]
+        for name, res in results.items():
+            if "rows" in res:
+                res["image"] = plot_case(CASES[name], res, out_md.parent / "img")
+        write_report(results, data["setting"], data["seconds"], data["machine"], out_md, out_md.parent / "img")
+        return 0
+    if args.list:
+        for c in CASES.values():
+            print(f"{c.name:26s} {'pending' if c.pending else 'ready':8s} {c.title}")
+        return 0
+    names = args.case or list(CASES)
+    unknown = [n for n in names if n not in CASES]
+    if unknown:
+        print(f"validate: unknown case(s) {', '.join(unknown)}; see --list", file=sys.stderr)
+        return 2
+    out_md = Path(args.out)
+    img_dir = out_md.parent / "img"
+    img_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    results = {}
+    with tempfile.TemporaryDirectory(prefix="validate-") as tmp:
+        for name in names:
+            c = CASES[name]
+            if c.pending:
+                results[name] = {"pending": c.pending}
+                continue
+            print(f"{name}:", flush=True)
+            res = run_case(c, setting, Path(tmp), args.timeout, lambda s: print(s, flush=True))
+            res["image"] = plot_case(c, res, img_dir)
+            results[name] = res
+    elapsed = time.perf_counter() - t0
+    machine = machine_text()
+    write_report(results, setting, elapsed, machine, out_md, img_dir)
+    out_md.with_suffix(".json").write_text(json.dumps({"setting": setting, "machine": machine,
+                                                       "seconds": elapsed, "cases": results}, indent=1,
+                                                      default=float))
+    print(f"wrote {out_md} ({elapsed / 60:.1f} min)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
