@@ -6,7 +6,6 @@ import pytest
 
 from taichi_sph.io.hdf5 import RunFile
 
-from .conftest import ROOT
 
 G = 9.81
 
