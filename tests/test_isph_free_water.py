@@ -163,14 +163,16 @@ def test_dambreak_front_martin_moyce(run_cli, tmp_path):
 
 @pytest.mark.parametrize("gradient", ["corrected", "difference"])
 def test_dambreak_stays_stable_and_conserves_volume(run_cli, tmp_path, gradient):
-    """Violent free-surface flow: no blow-up, volume measure drift bounded (measured -3.0 % corrected,
-    -3.7 % difference at dx = a / 20 over 0.3 s; bound 6 %)."""
+    """Violent free-surface flow: no blow-up, volume measure drift bounded. Measured at dx = a / 20 over
+    0.3 s: +0.27 % corrected, +0.23 % difference (largest excursion 0.46 %); -3.0 / -3.7 % before eq 34's
+    number-density test (docs/isph.md, "Dam-break front"). Bound 1 %: twice the largest excursion, and
+    three times under the old loss, so a return of the interior free-surface flags fails it."""
     out = tmp_path / "db.h5"
     r = run_cli("--config", "configs/dambreak.yaml", "--set", "end_time=0.3", "--set", f"isph.gradient={gradient}",
                 "--out", out, "--no-progress")
     assert r.returncode == 0, r.stderr
     with RunFile(out) as rf:
         d = rf.diagnostics()
-        assert abs(d["water_volume"][-1] / d["water_volume"][0] - 1) < 0.06
+        assert np.all(np.abs(d["water_volume"] / d["water_volume"][0] - 1) < 0.01)
         # speeds stay physical: below 1.5 x the free-fall speed from the column top sqrt(2 g 2a)
         assert d["max_speed"].max() < 1.5 * np.sqrt(2 * G * 0.2)
