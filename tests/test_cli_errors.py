@@ -55,6 +55,7 @@ CASES = [
     case("collision-distance-too-large", ["--set", "isph.collision_distance=1"],
          ["'isph.collision_distance'"]),
     case("ppe-on-failure-bad-choice", ["--set", "isph.ppe.on_failure=ignore"], ["'isph.ppe.on_failure'"]),
+    case("surface-density-above-one", ["--set", "isph.surface_density=1.2"], ["'isph.surface_density'"]),
     case("ppe-type-unknown", ["--set", "isph.ppe.type=amg"], ["'isph.ppe.type'"]),
     case("ppe-width-with-sparse-cg", ["--set", "isph.ppe.type=sparse_cg", "--set", "isph.ppe.width=40"],
          ["'isph.ppe.width'", "ell_pcg only"]),

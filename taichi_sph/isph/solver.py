@@ -61,6 +61,7 @@ class ISPHSolver:
         self.alpha = cfg.isph.alpha
         self.n_surf = cfg.n_surf()
         self.p_surface = 0.5 * self.rho_w * self.g_abs * dx if cfg.isph.free_surface_pressure == "half_layer" else 0.0
+        self.surface_density = cfg.isph.surface_density
         # ti.static switches: a scene compiles only what it uses
         self.turbulence = cfg.fluid.turbulence == "smagorinsky"
         self.no_slip = cfg.tank.boundary == "no_slip"
@@ -288,6 +289,10 @@ class ISPHSolver:
                         n_surf = self._table_at(self.nsurf_tab, self.eps[i])
                 if nb < n_surf or n_water == 0:
                     is_free = 1
+                    # free water: a count below N_surf with a full number density is a particle
+                    # inside the water whose outer ring has spread (Koshizuka & Oka's beta test)
+                    if n_water > 0 and self.eps[i] >= 1.0 and self.rho_n[i] >= self.surface_density * self.rho_w:
+                        is_free = 0
                 self.free[i] = is_free
                 Li = ti.Matrix.identity(float, self.dim)
                 if ti.static(self.grad_mode == GRAD_CORRECTED):
