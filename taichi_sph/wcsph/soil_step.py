@@ -10,8 +10,9 @@ fluid pair loops skip them. Per step, after the fluid density pass and force pas
 2. force pass (`_k_soil_forces`): eq 35 with eq 36, gravity, the pore-pressure force -grad p / rho_s
    (per unit soil mass, the (1 - n) grad p of the mixture theory over the soil's (1 - n) rho_s) and an
    optional damping.
-3. drag pass (`_k_drag`): eq 46 between soil and water, implicit (docs/biot.md), written to `adrag`
-   which the next kick adds to the acceleration.
+3. drag passes (`_k_drag_water`, then `_k_drag_soil`): the water's mixture momentum inside the soil
+   (pore part n under the water's forces, the rest moving with the soil) and eq 46 between soil and
+   water, implicit (docs/biot.md), written to `adrag` which the next kick adds to the acceleration.
 """
 
 import math
