@@ -10,8 +10,9 @@ fluid pair loops skip them. Per step, after the fluid density pass and force pas
 2. force pass (`_k_soil_forces`): eq 35 with eq 36, gravity, the pore-pressure force -grad p / rho_s
    (per unit soil mass, the (1 - n) grad p of the mixture theory over the soil's (1 - n) rho_s) and an
    optional damping.
-3. drag pass (`_k_drag`): eq 46 between soil and water, implicit (docs/biot.md), written to `adrag`
-   which the next kick adds to the acceleration.
+3. drag passes (`_k_drag_water`, then `_k_drag_soil`): the water's mixture momentum inside the soil
+   (pore part n under the water's forces, the rest moving with the soil) and eq 46 between soil and
+   water, implicit (docs/biot.md), written to `adrag` which the next kick adds to the acceleration.
 """
 
 import math
@@ -63,6 +64,8 @@ class SoilStep:
         self.pore = ti.field(float, ns)  # pore pressure at soil particles (gauge)
         self.phi_w = ti.field(float, ns)  # water presence sum_w V_j W_ij at soil particles
         self.adrag = ti.Vector.field(dim, float, ns)  # drag acceleration of eq 46, added by the kick
+        # water acceleration without drag inside the soil (scratch of the drag pass, not carried over)
+        self.amix = ti.Vector.field(dim, float, ns)
         self.red_soil = ti.Vector.field(_NRED_S, float, ())
         self.red_s = np.array([0.0, 0.0, 1e30, 1e30, 0.0, 0.0])
         if self.has_soil:
@@ -84,6 +87,7 @@ class SoilStep:
                 L = ti.Matrix.zero(float, self.dim, self.dim)
                 pn = 0.0
                 pd = 0.0
+                pdw = 0.0
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
@@ -99,6 +103,9 @@ class SoilStep:
                             pn += vj * self.p[j] * wij
                             pd += vj * wij
                         continue
+                    if ti.static(self.coupled):  # noqa: SIM102 (compile-time if)
+                        if kj == WALL:
+                            pdw += self.vol0 * kernels.w(ti.sqrt(r2), h, self.dim)
                     if r2 == 0.0:
                         continue
                     r = ti.sqrt(r2)
@@ -124,7 +131,9 @@ class SoilStep:
                     pore = pn / pd
                 self.pore[i] = pore
                 self.p[i] = pore
-                self.phi_w[i] = ti.min(pd, 1.0)
+                # wetness: the water's share of the support not taken by walls (1 in saturated soil
+                # beside a wall, whose wall particles take part of the kernel support)
+                self.phi_w[i] = ti.min(pd / ti.max(1.0 - pdw, 0.5), 1.0)
 
     @ti.kernel
     def _k_soil_forces(self, dt: float):
@@ -171,11 +180,22 @@ class SoilStep:
                     elif kj == WALL:
                         # boundary particle: the soil's own stress, extrapolated by its weight (Neumann)
                         xw = self._pos(sj)
+                        # (its equilibrium gradient: the buoyant unit weight (1 - phi_w rho_w / rho_s) rho g
+                        # where water fills the pores, whose pressure the pore term below extrapolates)
                         dsig = rhoi * self.g.dot(xw - xi)
+                        if ti.static(self.coupled):
+                            dsig *= 1.0 - self.phi_w[i] * self.rho_w / self.rho_g
                         mw = rhoi * self.vol0
-                        acc -= mw * (2.0 * si_r + dsig / (rhoi * rhoi) * ti.Matrix.identity(float, self.dim)) @ gw
                         db = self.wdepth[j]
                         nrm = self.normal[j]
+                        sw_r = si_r
+                        if ti.static(not self.no_slip):
+                            # a slip wall carries no shear traction: the mirror image of the stress across
+                            # the wall, R sigma R with R = I - 2 n n^T, whose shear on the wall's plane has
+                            # the opposite sign (the pair sum cancels it); no-slip walls carry sigma itself
+                            refl = ti.Matrix.identity(float, self.dim) - 2.0 * nrm.outer_product(nrm)
+                            sw_r = refl @ si_r @ refl
+                        acc -= mw * (si_r + sw_r + dsig / (rhoi * rhoi) * ti.Matrix.identity(float, self.dim)) @ gw
                         beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
                         vij = terms.boundary_relative_velocity(vi, nrm, beta, self.no_slip)
                         pij = terms.artificial_viscosity(vij, rij, r2, h, ci, rhoi, self.alpha_s, 0.0, self.av_eps)
@@ -204,29 +224,79 @@ class SoilStep:
         self.red_soil[None] = ti.Vector([ke, vmax, h_over_a, h_over_c, bad, first_bad])
 
     @ti.kernel
-    def _k_drag(self, dt: float):
-        """Biot drag of eq 46-47, implicit and local (docs/biot.md). With the velocities each particle
-        would have at the next kick without drag, u* (water) and v* (soil), and the other phase's
-        kernel average around it, the relative velocity after the kick is w = (u* - v*) / (1 + dt (C_w +
-        C_s)), C_w = g / k, C_s = n rho_w / rho_soil g / k (the water layer's and the soil's drag rates
-        per unit mass); the drag accelerations are -C_w w on water and +C_s w on soil, scaled by how much
-        of the other phase is present."""
+    def _k_drag_water(self, dt: float):
+        """Water side of the mixture momentum and the Biot drag (eq 46-47), implicit and local
+        (docs/biot.md). The water particles fill the whole volume, so inside the soil a water particle
+        carries the volume-averaged velocity u = n v_f + (1 - n) v_s: its pore part n moves under n times
+        the water's forces and the drag, its part (1 - n) moves with the soil. With the soil around it
+        (presence phi_s, porosity n_bar, velocity v_bar, acceleration a_bar, drag rate C_s = n rho_w /
+        rho_soil g / k) and n_i = 1 - phi_s (1 - n_bar): A = n_i a_i + (1 - n_i) a_bar; the relative
+        velocity q = u - v_bar after the kick is q* / (1 + dt lambda), q* from the velocities without
+        drag, lambda = n_i (phi_s g / k + C_s); the drag acceleration is (1 - n_i) C_s q - n_i phi_s (g / k) q.
+        `adrag` holds A - a_i plus the drag; `amix` holds A for the soil side."""
         h = self.h0
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
-            ki = self.kind[i]
-            if self.fmask[i] >= 1 and (ki == SOIL or ki == WATER):
+            if self.fmask[i] == 1 and self.kind[i] == WATER:
                 xi = self.x[i]
-                ui = self.v[i] + dt * self.a[i]
-                other = WATER
-                if ki == WATER:
-                    other = SOIL
+                ai = self.a[i]
                 wsum = 0.0
-                ubar = ti.Vector.zero(float, self.dim)
+                nsum = 0.0
                 csum = 0.0
+                vbar = ti.Vector.zero(float, self.dim)
+                abar = ti.Vector.zero(float, self.dim)
+                wall = 0.0
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
-                    if self.kind[j] != other:
+                    kj = self.kind[j]
+                    if kj != SOIL and kj != WALL:
+                        continue
+                    rij = xi - self.x[j]
+                    r2 = rij.dot(rij)
+                    if r2 >= 4.0 * h * h:
+                        continue
+                    if kj == WALL:
+                        wall += self.vol0 * kernels.w(ti.sqrt(r2), h, self.dim)
+                        continue
+                    rhoj = self.rho[j]
+                    wij = kernels.w(ti.sqrt(r2), h, self.dim) * self.m[j] / rhoj
+                    nj = 1.0 - rhoj / self.rho_g
+                    wsum += wij
+                    nsum += wij * nj
+                    csum += wij * nj * self.rho_w / rhoj
+                    vbar += wij * self.v[j]
+                    abar += wij * self.a[j]
+                ad = ti.Vector.zero(float, self.dim)
+                amix = ai
+                if wsum > 0.0:
+                    phi = ti.min(wsum / ti.max(1.0 - wall, 0.5), 1.0)  # the soil's share, walls aside
+                    n_i = 1.0 - phi * (1.0 - nsum / wsum)
+                    cs = csum / wsum * self.g_over_k
+                    cw = phi * self.g_over_k
+                    abar /= wsum
+                    vbar /= wsum
+                    amix = n_i * ai + (1.0 - n_i) * abar
+                    q = ((self.v[i] + dt * amix) - (vbar + dt * abar)) / (1.0 + dt * n_i * (cw + cs))
+                    ad = amix - ai + ((1.0 - n_i) * cs - n_i * cw) * q
+                self.adrag[i] = ad
+                self.amix[i] = amix
+
+    @ti.kernel
+    def _k_drag_soil(self, dt: float):
+        """Soil side of the implicit Biot drag (eq 46-47, docs/biot.md): with the water around (presence
+        phi_w, mean velocity without drag u_bar + dt A_bar from `_k_drag_water`) and the soil particle's
+        own v + dt a, q = (u* - v*) / (1 + dt n (g / k + phi_w C_s)), drag acceleration phi_w C_s q with
+        C_s = n rho_w / rho_soil g / k."""
+        h = self.h0
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n):
+            if self.fmask[i] == 2:
+                xi = self.x[i]
+                wsum = 0.0
+                ubar = ti.Vector.zero(float, self.dim)
+                for k in range(self.grid.nbr_count[i]):
+                    j = self.grid.nbr[i, k]
+                    if self.kind[j] != WATER:
                         continue
                     rij = xi - self.x[j]
                     r2 = rij.dot(rij)
@@ -234,23 +304,15 @@ class SoilStep:
                         continue
                     wij = kernels.w(ti.sqrt(r2), h, self.dim) * self.m[j] / self.rho[j]
                     wsum += wij
-                    ubar += wij * (self.v[j] + dt * self.a[j])
-                    if other == SOIL:
-                        csum += wij * (1.0 - self.rho[j] / self.rho_g) * self.rho_w / self.rho[j]
+                    ubar += wij * (self.v[j] + dt * self.amix[j])
                 ad = ti.Vector.zero(float, self.dim)
                 if wsum > 0.0:
-                    phi = ti.min(wsum, 1.0)
+                    phi = self.phi_w[i]
                     ubar /= wsum
-                    if ki == WATER:
-                        cw = self.g_over_k * phi
-                        cs = csum / wsum * self.g_over_k
-                        w = (ui - ubar) / (1.0 + dt * (cw + cs))
-                        ad = -cw * w
-                    else:
-                        cw = self.g_over_k
-                        cs = (1.0 - self.rho[i] / self.rho_g) * self.rho_w / self.rho[i] * self.g_over_k * phi
-                        w = (ubar - ui) / (1.0 + dt * (cw + cs))
-                        ad = cs * w
+                    n_s = 1.0 - self.rho[i] / self.rho_g
+                    cs = n_s * self.rho_w / self.rho[i] * self.g_over_k * phi
+                    q = (ubar - (self.v[i] + dt * self.a[i])) / (1.0 + dt * n_s * (self.g_over_k + cs))
+                    ad = cs * q
                 self.adrag[i] = ad
 
     # ------------------------------------------------------------------ host side
@@ -267,7 +329,8 @@ class SoilStep:
         self.last["kinetic_energy"] += float(r[0])
         self.last["max_speed"] = max(self.last["max_speed"], float(r[1]))
         if self.coupled:
-            self._k_drag(dt)
+            self._k_drag_water(dt)
+            self._k_drag_soil(dt)
 
     def _soil_output(self, order) -> dict:
         """Frame fields of the soil (zero for other particles): effective stress (compression positive),

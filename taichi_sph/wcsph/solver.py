@@ -609,8 +609,12 @@ class WCSPHSolver(SoilStep):
         return self.last
 
     def initial_diagnostics(self) -> dict:
-        """Neighbour lists, wall pressure and forces at t = 0 (the first step needs a^0)."""
+        """Neighbour lists, wall pressure and forces at t = 0 (the first step needs a^0). The soil's pore
+        pressure and water presence are interpolated first (a stress pass with dt = 0 changes nothing
+        else), so that a^0 of the soil sees its pore pressure."""
         self.neighbour_search()
+        if self.has_soil:
+            self._soil_stress(0.0)
         self._forces(0.0)
         if self.has_soil:
             self._soil_forces(0.0)
