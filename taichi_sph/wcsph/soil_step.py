@@ -21,7 +21,7 @@ import taichi as ti
 
 from .. import guard
 from ..scene import SOIL, WALL, WATER
-from ..sph import kernels
+from ..sph import kernels, operators
 from . import soil, terms
 
 _NRED_S = 6
@@ -87,7 +87,7 @@ class SoilStep:
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
-                    rij = xi - self._pos(sj)
+                    rij = operators.rel(xi, self._pos(sj), self.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * h * h:
                         continue
@@ -154,7 +154,7 @@ class SoilStep:
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
-                    rij = xi - self._pos(sj)
+                    rij = operators.rel(xi, self._pos(sj), self.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * h * h or r2 == 0.0:
                         continue
@@ -170,7 +170,7 @@ class SoilStep:
                         acc -= mj * ((si_r + self.sig[j] / (rhoj * rhoj)) @ gw + pij * gw)
                     elif kj == WALL:
                         # boundary particle: the soil's own stress, extrapolated by its weight (Neumann)
-                        xw = self._pos(sj)
+                        xw = xi - rij  # the wall particle's nearest image
                         dsig = rhoi * self.g.dot(xw - xi)
                         mw = rhoi * self.vol0
                         acc -= mw * (2.0 * si_r + dsig / (rhoi * rhoi) * ti.Matrix.identity(float, self.dim)) @ gw
@@ -228,7 +228,7 @@ class SoilStep:
                     j = self.grid.nbr[i, k]
                     if self.kind[j] != other:
                         continue
-                    rij = xi - self.x[j]
+                    rij = operators.rel(xi, self.x[j], self.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * h * h:
                         continue
