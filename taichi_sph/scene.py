@@ -30,6 +30,8 @@ class Scene:
     hi: np.ndarray
     tank_size: np.ndarray
     markers: dict = field(default_factory=dict)  # soil markers: position, eps0, d50, volume (M,)
+    velocity: np.ndarray | None = None  # (N, dim) initial velocity; None: all at rest
+    period: tuple = ()  # period L per axis, 0.0 where not periodic (empty: no periodic axis)
 
     @property
     def n(self) -> int:
@@ -41,6 +43,10 @@ class Scene:
 
     def count(self, kind: int) -> int:
         return int((self.kind == kind).sum())
+
+    def periods(self) -> tuple:
+        """Period L of each axis, 0.0 where the axis is not periodic (for sph.operators.rel)."""
+        return tuple(float(v) for v in self.period) if self.period else (0.0,) * self.dim
 
 
 def lattice_in_box(lo, hi, dx) -> np.ndarray:
@@ -54,8 +60,9 @@ def lattice_in_box(lo, hi, dx) -> np.ndarray:
     return np.stack([g.ravel() for g in grids], axis=1)
 
 
-def tank_walls(size, dx, layers, open_top=True):
-    """Wall particles around the interior [0, size] and their inward unit normals."""
+def tank_walls(size, dx, layers, open_top=True, periodic=()):
+    """Wall particles around the interior [0, size] and their inward unit normals; none on the two
+    sides of a periodic axis."""
     dim = len(size)
     axes = []
     for ax, s in enumerate(size):
@@ -66,6 +73,8 @@ def tank_walls(size, dx, layers, open_top=True):
         above = s + (np.arange(layers) + 0.5) * dx
         if ax == dim - 1 and open_top:
             above = np.zeros(0)
+        if ax in periodic:
+            below = above = np.zeros(0)
         axes.append(np.concatenate([below, inner, above]))
     grids = np.meshgrid(*axes, indexing="ij")
     pts = np.stack([g.ravel() for g in grids], axis=1)
@@ -140,6 +149,7 @@ def region_bounds(reg, dim: int, tank_size, margin: float):
         lo = np.array([reg.toe[0]] + ([0.0] if dim == 3 else []) + [reg.bottom])
         hi = np.array([reg.toe[1]] + ([size[1]] if dim == 3 else []) + [reg.top])
     tol = 1e-9 * max(1.0, float(size.max()))
+    margin = np.broadcast_to(np.asarray(margin, float), lo.shape)
     lo = np.where(lo <= tol, lo - margin, lo)
     hi = np.where(hi >= size - tol, hi + margin, hi)
     return lo, hi
@@ -157,8 +167,9 @@ def inside_region(pts: np.ndarray, reg, dim: int, tank_size, margin: float = 0.0
         frac = (z - reg.bottom) / (reg.top - reg.bottom)
         left = reg.toe[0] + frac * (reg.crest[0] - reg.toe[0])
         right = reg.toe[1] + frac * (reg.crest[1] - reg.toe[1])
-        left = np.where(left <= tol, left - margin, left)
-        right = np.where(right >= tank_size[0] - tol, right + margin, right)
+        mx = float(np.ravel(margin)[0])
+        left = np.where(left <= tol, left - mx, left)
+        right = np.where(right >= tank_size[0] - tol, right + mx, right)
         mask &= (x >= left - tol) & (x <= right + tol)
     return mask
 
@@ -175,7 +186,8 @@ def build_markers(cfg) -> dict:
     s = soil.marker_spacing or cfg.dx
     nodes = soil.lattice == "nodes"
     size = np.asarray(cfg.tank.size, float)
-    margin = cfg.wall_layers() * cfg.dx
+    # into the walls, but not across a periodic side (its images continue the ground there)
+    margin = np.array([0.0 if ax in cfg.tank.periodic else cfg.wall_layers() * cfg.dx for ax in range(dim)])
     pos = np.zeros((0, dim))
     eps0 = np.zeros(0)
     d50 = np.zeros(0)
@@ -199,7 +211,23 @@ def build_markers(cfg) -> dict:
         pos = np.concatenate([pos, pts])
         eps0 = np.concatenate([eps0, np.full(len(pts), reg.eps0)])
         d50 = np.concatenate([d50, np.full(len(pts), reg.d50)])
+    pos, eps0, d50 = periodic_images(pos, [eps0, d50], size, cfg.tank.periodic, SUPPORT_FACTOR * cfg.dx)
     return {"position": pos, "eps0": eps0, "d50": d50, "volume": np.full(len(pos), s**dim)}
+
+
+def periodic_images(pos: np.ndarray, values: list, size, periodic, reach: float):
+    """Fixed points plus their images shifted by -L and +L along each periodic axis, as far as `reach`
+    beyond each periodic side (markers are never moved, so their images are added once and the
+    porosity sum needs no minimum image). Returns the points and each array of `values` extended alike."""
+    for ax in periodic:
+        L = float(size[ax])
+        low = pos[:, ax] < reach
+        high = pos[:, ax] >= L - reach
+        shift = np.zeros(pos.shape[1])
+        shift[ax] = L
+        values = [np.concatenate([v, v[low], v[high]]) for v in values]
+        pos = np.concatenate([pos, pos[low] + shift, pos[high] - shift])
+    return (pos, *values)
 
 
 def remove_overlaps(keep: np.ndarray, others: np.ndarray, dist: float) -> np.ndarray:
@@ -238,26 +266,30 @@ def build_scene(cfg) -> Scene:
     layers = cfg.wall_layers()
 
     water = np.zeros((0, dim))
+    water_v = np.zeros((0, dim))
     for box in cfg.water:
         # water in ground of porosity eps fills its pores: spacing dx / eps^(1/dim), mass unchanged
         pts = porous_lattice(box.min, box.max, dx, box.porosity)
         if box.jitter > 0:
             pts = pts + np.random.default_rng(len(water)).uniform(-box.jitter, box.jitter, pts.shape) * dx
-        pts = pts[remove_overlaps(pts, water, 0.5 * dx)]
-        water = np.concatenate([water, pts])
+        keep = remove_overlaps(pts, water, 0.5 * dx)
+        water = np.concatenate([water, pts[keep]])
+        water_v = np.concatenate([water_v, block_velocity(box, pts[keep], size)])
 
-    wall, wall_n = tank_walls(size, dx, layers, cfg.tank.open_top)
+    wall, wall_n = tank_walls(size, dx, layers, cfg.tank.open_top, tuple(cfg.tank.periodic))
     for box in cfg.obstacles:
         pts, nrm = obstacle_particles(box.min, box.max, dx)
         wall = np.concatenate([wall, pts])
         wall_n = np.concatenate([wall_n, nrm])
-    water = water[remove_overlaps(water, wall, 0.5 * dx)]
+    keep = remove_overlaps(water, wall, 0.5 * dx)
+    water, water_v = water[keep], water_v[keep]
     air = np.zeros((0, dim))
     for box in getattr(cfg, "air", []):  # air blocks displace the water they overlap
         pts = lattice_in_box(box.min, box.max, dx)
         pts = pts[remove_overlaps(pts, air, 0.5 * dx) & remove_overlaps(pts, wall, 0.5 * dx)]
         air = np.concatenate([air, pts])
-    water = water[remove_overlaps(water, air, 0.5 * dx)]
+    keep = remove_overlaps(water, air, 0.5 * dx)
+    water, water_v = water[keep], water_v[keep]
 
     position = np.concatenate([water, wall])
     kind = np.concatenate([np.full(len(water), WATER, np.int8), np.full(len(wall), WALL, np.int8)])
@@ -272,8 +304,32 @@ def build_scene(cfg) -> Scene:
     lo = -(layers + 1) * dx * np.ones(dim)
     hi = size + (layers + 1) * dx
     hi[-1] = size[-1] + max(0.5 * size[-1], 4 * r_e)
+    period = tuple(float(size[ax]) if ax in cfg.tank.periodic else 0.0 for ax in range(dim))
+    for ax in cfg.tank.periodic:
+        lo[ax], hi[ax] = 0.0, size[ax]
+    velocity = None
+    if np.any(water_v != 0.0):
+        velocity = np.zeros_like(position)
+        velocity[: len(water_v)] = water_v
     return Scene(dim=dim, dx=dx, position=position, kind=kind, normal=normal, lo=lo, hi=hi, tank_size=size,
-                 markers=build_markers(cfg))
+                 markers=build_markers(cfg), velocity=velocity, period=period)
+
+
+def taylor_green_velocity(pts: np.ndarray, size, scale: float) -> np.ndarray:
+    """2D Taylor-Green vortex in the doubly periodic box [0, Lx) x [0, Ly):
+    u = U sin(kx x) cos(ky y), v = -U (kx / ky) cos(kx x) sin(ky y), k = 2 pi / L (divergence free;
+    its kinetic energy decays as exp(-2 nu (kx^2 + ky^2) t))."""
+    kx, ky = 2.0 * np.pi / float(size[0]), 2.0 * np.pi / float(size[1])
+    x, y = pts[:, 0], pts[:, 1]
+    return np.stack([scale * np.sin(kx * x) * np.cos(ky * y),
+                     -scale * (kx / ky) * np.cos(kx * x) * np.sin(ky * y)], axis=1)
+
+
+def block_velocity(box, pts: np.ndarray, size) -> np.ndarray:
+    """Initial velocity of a water block's particles (`water[].initial_velocity`)."""
+    if getattr(box, "initial_velocity", "rest") == "taylor_green":
+        return taylor_green_velocity(pts, size, box.velocity_scale)
+    return np.zeros_like(pts)
 
 
 def describe(scene: Scene) -> str:

@@ -32,6 +32,7 @@ SECTIONS = [("Config", "top level"), ("Output", "output"), ("Images", "output.im
 SECTIONS += [("WCSPH", "wcsph"), ("WCSPHWater", "wcsph.water"), ("WCSPHAir", "wcsph.air"),
              ("ArtificialViscosity", "wcsph.artificial_viscosity")]
 SECTIONS += [("Checkpoint", "checkpoint"), ("Metric", "metrics[k]")]
+SECTIONS += [("WaterBlock", "water[k] (besides min and max)")]
 
 FOOTER = """## Fixed names
 

@@ -281,10 +281,45 @@ def _channel(setting):
     return runs, evaluate
 
 
-pending("taylor_green", "Taylor-Green vortex decay", "decay exp(-2 nu k^2 t)", "none in SPEC 7",
-        "needs periodic boundaries (the neighbour grid and both solvers use plain differences x_i - x_j) and an "
-        "initial velocity field in the config, neither of which this version has; viscosity and walls are "
-        "validated without periodicity by channel_startup")
+TG_NU, TG_U, TG_L = 0.01, 1.0, 1.0  # configs/taylor_green.yaml: Re = U L / nu = 100
+
+
+def taylor_green_energy(t):
+    """Kinetic energy of the 2D Taylor-Green vortex in the box L x L (rho 1000): rho L^2 U^2 / 4 at t = 0,
+    decaying as exp(-4 nu k^2 t), k = 2 pi / L."""
+    k = 2 * math.pi / TG_L
+    return RHO * TG_L**2 * TG_U**2 / 4 * np.exp(-4 * TG_NU * k * k * np.asarray(t))
+
+
+@case("taylor_green", "Taylor-Green vortex decay (2D, doubly periodic, Re 100, isph)",
+      "kinetic energy E = rho L^2 U^2 / 4 exp(-4 nu k^2 t), velocity U exp(-2 nu k^2 t) (sin kx cos ky, "
+      "-cos kx sin ky); error: the largest |E / E_exact - 1| over 0.5 s",
+      "none in SPEC 7 (viscosity, projection and periodic boundaries)", None)
+def _taylor_green(setting):
+    ns = (16, 32, 64) if setting == "small" else (16, 32, 64, 128)
+    runs = [Run("isph", TG_L / n, "configs/taylor_green.yaml", [f"dx={TG_L / n:.8g}", f"dt={0.064 / n:.6g}"])
+            for n in ns]
+
+    def evaluate(path, run):
+        from taichi_sph.io.hdf5 import RunFile
+
+        with RunFile(path) as rf:
+            d = rf.diagnostics()
+            ratio = d["kinetic_energy"] / taylor_green_energy(d["time"])
+            f = rf.frame(-1)
+            t = float(rf.times[-1])
+            w = (rf.kind == 0) & f["active"]
+            x, v = f["position"][w], f["velocity"][w]
+        k = 2 * math.pi / TG_L
+        amp = TG_U * math.exp(-2 * TG_NU * k * k * t)
+        exact = amp * np.stack([np.sin(k * x[:, 0]) * np.cos(k * x[:, 1]), -np.cos(k * x[:, 0]) * np.sin(k * x[:, 1])], 1)
+        return {"error": float(np.max(np.abs(ratio - 1))),
+                "velocity L2 at end": float(np.sqrt(np.mean(np.sum((v - exact) ** 2, 1)) / np.mean(np.sum(exact**2, 1)))),
+                "energy at end / exact": float(ratio[-1])}
+
+    return runs, evaluate
+
+
 for _name, _title, _ref, _target in (
         ("terzaghi", "Terzaghi consolidation (wcsph_biot)", "1D series solution, double drainage",
          "isochrones within 3 %"),

@@ -51,6 +51,12 @@ class WaterBlock(Box):
     #: random displacement of each particle, uniform in [-jitter, jitter] x dx along each axis (stability
     #: tests; a fixed seed, so a run repeats); at most 0.5
     jitter: Annotated[float, Field(ge=0, le=0.5)] = 0.0
+    #: initial velocity of the block's particles: rest, or the 2D Taylor-Green vortex
+    #: u = U sin(kx x) cos(ky y), v = -U (kx / ky) cos(kx x) sin(ky y), k = 2 pi / L with L the tank
+    #: size along that axis (needs dim 2 and both axes in `tank.periodic`)
+    initial_velocity: Literal["rest", "taylor_green"] = "rest"
+    #: U of `initial_velocity` (m/s)
+    velocity_scale: NonNegFloat = 1.0
 
 
 class SoilRegion(Strict):
@@ -185,8 +191,9 @@ class Tank(Strict):
     boundary: Literal["no_slip", "slip"] = "no_slip"
     #: no lid: the top is open
     open_top: bool = True
-    #: axes (0-based) whose two side walls are left out and replaced by periodic wrap
-    #: (reserved; not implemented yet: must be empty)
+    #: axes (0-based) whose two side walls are left out and replaced by periodic wrap: the tank size
+    #: along such an axis is the period L (a whole number of dx, at least 3 neighbour-search cells:
+    #: 7.2 dx in mode isph); particles leaving at L come back at 0, pairs see the nearest image
     periodic: list[int] = []
 
 
@@ -627,8 +634,7 @@ def check(cfg: "Config") -> None:
     _check_images(cfg)
     _check_metrics(cfg)
     _check_ppe(cfg)
-    if cfg.tank.periodic:
-        _fail("tank.periodic", "periodic boundaries are not implemented yet; use slip walls")
+    _check_periodic(cfg)
     if min(cfg.tank.size) < 2 * cfg.dx:
         _fail("tank.size", f"every side must hold at least 2 particles of dx = {cfg.dx}")
     for k, box in enumerate(cfg.air):
@@ -725,6 +731,39 @@ def _explicit_keys(model, prefix: str) -> list[str]:
         else:
             out.append(f"{prefix}.{name}")
     return sorted(out)
+
+
+def periodic_cell(cfg: "Config") -> float:
+    """Neighbour-search cell of the mode (m): the support radius 2.4 dx (isph), or 2 h_max plus the
+    Verlet skin (wcsph_biot, h_max = 1.1 h0 with variable h)."""
+    re = 2.4 * cfg.dx
+    if cfg.mode == "isph":
+        return re
+    h_hi = (1.1 if cfg.wcsph.variable_h else 1.0) * 0.5 * re
+    return 2.0 * h_hi + cfg.wcsph.neighbour_skin * re
+
+
+def _check_periodic(cfg: "Config") -> None:
+    """tank.periodic: valid distinct axes, each a whole number of dx long and at least 3 search cells;
+    a Taylor-Green block needs a 2D doubly periodic tank."""
+    per = cfg.tank.periodic
+    if len(set(per)) != len(per):
+        _fail("tank.periodic", f"lists an axis twice: {per}")
+    cell = periodic_cell(cfg)
+    for a in per:
+        if not 0 <= a < cfg.dim:
+            _fail("tank.periodic", f"axis {a} does not exist in {cfg.dim}D (axes 0 to {cfg.dim - 1})")
+        L = cfg.tank.size[a]
+        n = L / cfg.dx
+        if abs(n - round(n)) > 1e-6 * max(1.0, n):
+            _fail("tank.size", f"the period along periodic axis {a}, {L:g} m, must be a whole number of "
+                  f"dx = {cfg.dx:g} (it is {n:.6g})")
+        if L < 3.0 * cell:
+            _fail("tank.size", f"the period along periodic axis {a}, {L:g} m, must hold 3 neighbour-search "
+                  f"cells of {cell:.4g} m (at least {3.0 * cell:.4g} m)")
+    for k, block in enumerate(cfg.water):
+        if block.initial_velocity == "taylor_green" and (cfg.dim != 2 or sorted(per) != [0, 1]):
+            _fail(f"water[{k}].initial_velocity", "taylor_green needs dim 2 and tank.periodic [0, 1]")
 
 
 def _check_mode_sections(cfg: Config) -> None:

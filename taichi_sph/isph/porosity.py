@@ -93,7 +93,10 @@ class MarkerSet:
         self.eps0.from_numpy(np.asarray(markers["eps0"]))
         self.d50.from_numpy(np.asarray(markers["d50"]))
         self.volume.from_numpy(np.asarray(markers["volume"]))
-        # markers outside the particle grid box cannot be reached by any particle: the grid drops them
+        # markers outside the particle grid box grown by one support radius cannot be reached by any
+        # particle: the grid drops them (the margin keeps the images of markers across a periodic side)
+        lo = np.asarray(lo, float) - support_radius
+        hi = np.asarray(hi, float) + support_radius
         self.grid = NeighbourGrid(m, dim, lo, hi, support_radius, 1)
         active = ti.field(ti.i32, m)
         active.fill(1)

@@ -81,6 +81,9 @@ class ISPHSolver:
 
         self.n = scene.n
         self.n_water = scene.count(WATER)
+        #: period of each axis (0.0: not periodic), for operators.rel and operators.wrap
+        self.period = scene.periods()
+        self.periodic = any(v > 0.0 for v in self.period)
         n = self.n
         self.max_nb = cfg.max_neighbours()
         vec = ti.types.vector(dim, float)
@@ -108,6 +111,9 @@ class ISPHSolver:
         self.b = ti.field(float, max(self.n_water, 1))
         self.psol = ti.field(float, max(self.n_water, 1))
         self.triplets = ti.field(ti.i32, ())
+        #: Dirichlet rows of the last assembly; none (closed or periodic box full of water): the PPE is
+        #: singular up to a constant and is solved for zero-mean pressure
+        self.dirichlet_rows = ti.field(ti.i32, ())
         self.vtmp = ti.Vector.field(dim, float, n)
         self.grad_c = ti.Vector.field(dim, float, n)
         self.wall_acc = ti.field(float, n)
@@ -130,9 +136,11 @@ class ISPHSolver:
         self.active.fill(1)
         self.eps.fill(1.0)
         self.v.fill(0.0)
+        if scene.velocity is not None:
+            self.v.from_numpy(scene.velocity.astype(self.np_fp))
         self.p.fill(0.0)
 
-        self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.re, self.max_nb)
+        self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.re, self.max_nb, period=self.period)
         self.markers = None
         if self.porous:
             self.markers = _porosity.MarkerSet(scene.markers, dim, scene.lo, scene.hi, self.re)
@@ -214,7 +222,7 @@ class ISPHSolver:
                     for k in range(self.grid.nbr_count[i]):
                         j = self.grid.nbr[i, k]
                         if self.kind[j] == WALL and self.wet[j] == 0:
-                            if (xi - self.x[j]).dot(self.up) >= -0.6 * self.dx:
+                            if operators.rel(xi, self.x[j], self.period).dot(self.up) >= -0.6 * self.dx:
                                 self.wet[j] = 1
 
     @ti.func
@@ -263,7 +271,7 @@ class ISPHSolver:
                         share = self.eps[i] / self.eps[j]
                         vj = self.mass / (self.eps[j] * self.rho_w)
                     nb += share
-                    rij = xi - self.x[j]
+                    rij = operators.rel(xi, self.x[j], self.period)
                     r = rij.norm()
                     wsum += share * kernels.w(r, self.h, self.dim)
                     if r > 0.0:
@@ -337,7 +345,7 @@ class ISPHSolver:
                     j = self.grid.nbr[i, k]
                     if not self._present(j):
                         continue
-                    rij = xi - self.x[j]
+                    rij = operators.rel(xi, self.x[j], self.period)
                     r = rij.norm()
                     vj = self.v[j]
                     vol = self.mass / self.rho_w
@@ -376,7 +384,7 @@ class ISPHSolver:
                     j = self.grid.nbr[i, k]
                     if not self._present(j):
                         continue
-                    rij = xi - self.x[j]
+                    rij = operators.rel(xi, self.x[j], self.period)
                     r = rij.norm()
                     if r > 0.0:
                         f = operators.laplacian_weight(r, self.h, self.eta2, self.dim)
@@ -442,6 +450,7 @@ class ISPHSolver:
         dt = self.dt[None]
         dirichlet_diag = self.dirichlet_scale * dt / self.rho_w
         self.triplets[None] = 0
+        self.dirichlet_rows[None] = 0
         for i in range(self.n):
             if self.kind[i] == WATER:
                 ri = self.row[i]
@@ -451,7 +460,6 @@ class ISPHSolver:
                     xi = self.x[i]
                     k_i = self.kcoef[i]
                     vi = self.vstar[i] - k_i * self.rho_w * self.g
-                    phi_i = self.rho_w * self.g.dot(xi)
                     eps_i = self.eps[i]
                     rb_i = eps_i * self.rho_w
                     div = 0.0
@@ -461,7 +469,7 @@ class ISPHSolver:
                         j = self.grid.nbr[i, k]
                         if not self._present(j):
                             continue
-                        rij = xi - self.x[j]
+                        rij = operators.rel(xi, self.x[j], self.period)
                         r = rij.norm()
                         if r > 0.0:
                             gw = kernels.grad_w(rij, r, self.h, self.dim)
@@ -476,7 +484,7 @@ class ISPHSolver:
                                 rb_j = self.eps[j] * self.rho_w
                                 K = -operators.variable_laplacian_pair(self.mass, rb_i, k_i, rb_j, self.kcoef[j], f)
                                 diag += K
-                                rhs += K * (phi_i - self.rho_w * self.g.dot(self.x[j]))
+                                rhs += K * self.rho_w * self.g.dot(rij)  # phi_i - phi_j
                                 if self.free[j] == 1 or self.solve_mask[j] == 0:
                                     rhs += K * self._dirichlet_value(j)
                                 else:
@@ -495,6 +503,7 @@ class ISPHSolver:
                     self._ppe_add(A, ri, ri, diag)
                     self.b[ri] = ti.cast(rhs - source, self.b.dtype)
                 else:
+                    ti.atomic_add(self.dirichlet_rows[None], 1)
                     self._ppe_add(A, ri, ri, dirichlet_diag)
                     self.b[ri] = ti.cast(dirichlet_diag * self._dirichlet_value(i), self.b.dtype)
 
@@ -534,10 +543,10 @@ class ISPHSolver:
                     if not self._present(j):
                         continue
                     if self.kind[j] == WALL:
-                        r = (xi - self.x[j]).norm()
+                        r = operators.rel(xi, self.x[j], self.period).norm()
                         wij = kernels.w(r, self.h, self.dim)
                         ti.atomic_add(self.wall_acc[j], wij * operators.wall_pressure(self.p[i], self.rho_w, self.g,
-                                                                                   self.x[j], xi))
+                                                                                   xi - operators.rel(xi, self.x[j], self.period), xi))
                         ti.atomic_add(self.wall_wsum[j], wij)
         for i in range(self.n):
             if self.kind[i] == WALL:
@@ -561,7 +570,7 @@ class ISPHSolver:
                     j = self.grid.nbr[i, k]
                     if not self._present(j):
                         continue
-                    rij = xi - self.x[j]
+                    rij = operators.rel(xi, self.x[j], self.period)
                     r = rij.norm()
                     if r > 0.0:
                         gw = kernels.grad_w(rij, r, self.h, self.dim)
@@ -575,7 +584,7 @@ class ISPHSolver:
                             gp += m_j * (pj / (rb_j * rb_j) + pi / (rb_i * rb_i)) * gw
                         else:
                             # P - phi: the hydrostatic part cancels pair by pair
-                            gp += m_j / rb_j * ((pj - pi) - self.rho_w * self.g.dot(self.x[j] - xi)) * gw
+                            gp += m_j / rb_j * ((pj - pi) - self.rho_w * self.g.dot(-rij)) * gw
                 vrest = self.vstar[i]
                 if ti.static(self.grad_mode == GRAD_SYMMETRIC):
                     gp *= rb_i
@@ -602,10 +611,10 @@ class ISPHSolver:
                 n_wall = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
-                    rij = self.x[j] - xi
+                    rij = operators.rel(self.x[j], xi, self.period)
                     r = rij.norm()
                     if self.kind[j] == WALL:
-                        d = (xi - self.x[j]).dot(self.normal[j]) - 0.5 * self.dx
+                        d = operators.rel(xi, self.x[j], self.period).dot(self.normal[j]) - 0.5 * self.dx
                         if d < d_wall:
                             d_wall = d
                             n_wall = self.normal[j]
@@ -655,6 +664,8 @@ class ISPHSolver:
                         ds *= self.shift_max / mag
                     dr += ds
                 self.x[i] += dr
+                if ti.static(self.periodic):
+                    self.x[i] = operators.wrap(self.x[i], self.period)
 
     @ti.kernel
     def _k_diagnostics(self) -> ti.types.vector(6, float):
@@ -727,7 +738,7 @@ class ISPHSolver:
             self._k_assemble_ell()
             t0 = self._tick("ppe_assembly", t0)
             try:
-                iters, res, ok = self.ppe.solve(self.n_water)
+                iters, res, ok = self.ppe.solve(self.n_water, zero_mean=self.dirichlet_rows[None] == 0)
             except EllOverflowError as exc:
                 raise InstabilityError(
                     f"step {self.step_count + 1}, t = {self.time + dt:.6g} s: a PPE row has {exc.needed} "
@@ -742,7 +753,7 @@ class ISPHSolver:
             b = self.b.to_numpy()[: self.n_water]
             x0 = self.psol.to_numpy()[: self.n_water]
             t0 = self._tick("ppe_assembly", t0)
-            sol, iters, res, ok = self.ppe.solve(b, x0)
+            sol, iters, res, ok = self.ppe.solve(b, x0, zero_mean=self.dirichlet_rows[None] == 0)
         t0 = self._tick("ppe_solve", t0)
         if not ok:
             guard.solver_failure(self.step_count + 1, self.time + dt, iters, res, self.ppe.tolerance,

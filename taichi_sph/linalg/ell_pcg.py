@@ -48,6 +48,9 @@ with the r.r and r.z reductions) that returns one scalar, |r|^2, to the host; no
 device. When the recurrence says |r| / |b| <= tolerance, the true residual b - A x is computed; if it
 is above the tolerance (round-off drift, f32), CG restarts from the true residual, at most
 MAX_RESTARTS times, within `max_iterations` iterations in all. A zero right-hand side gives x = 0.
+A matrix whose null space is the constants (a PPE without any Dirichlet row: a closed or periodic box
+full of water) is solved with `zero_mean=True`: b is projected onto the range of A (its mean
+removed), CG converges in that range, and the zero-mean solution is returned.
 The vectors use the runtime's default float (f32 or f64) unless `dtype` is given. An f32 solve stalls
 where the rounding of b - A x, about eps_32 |A| |x| / |b|, meets the tolerance (1e-5 to 1e-4 relative
 on a 900-row PPE) and then reports converged = False.
@@ -135,6 +138,7 @@ class EllPCG:
         self.alpha = ti.field(fp, ())
         self.beta = ti.field(fp, ())
         self.breakdown = ti.field(ti.i32, ())
+        self.mean = ti.field(ti.f64, ())
         self.n[None] = self.n_max
 
     # ------------------------------------------------------------------ filling rows in a kernel
@@ -294,6 +298,17 @@ class EllPCG:
         return out
 
     @ti.kernel
+    def _k_remove_mean(self, v: ti.template()):
+        """v -= mean(v) over the first n rows (summed in f64)."""
+        n = self.n[None]
+        self.mean[None] = 0.0
+        for i in range(n):
+            self.mean[None] += ti.cast(v[i], ti.f64)
+        m = ti.cast(self.mean[None] / ti.max(n, 1), self.dtype)
+        for i in range(n):
+            v[i] -= m
+
+    @ti.kernel
     def _k_zero_x(self):
         for i in range(self.n[None]):
             self.x[i] = ti.cast(0, self.dtype)
@@ -311,8 +326,9 @@ class EllPCG:
         if needed > 0:
             raise EllOverflowError(needed, self.max_nb)
 
-    def solve(self, n: int | None = None):
-        """Solve the first n rows (default: the n already set) from the x in the field.
+    def solve(self, n: int | None = None, zero_mean: bool = False):
+        """Solve the first n rows (default: the n already set) from the x in the field; `zero_mean` for a
+        singular A with the constants as null space (b's mean is removed, x returned with zero mean).
 
         Returns (iterations, relative residual |b - A x| / |b| of the returned x, converged).
         """
@@ -321,6 +337,8 @@ class EllPCG:
             if not 0 <= n <= self.n_max:
                 raise ValueError(f"n = {n} is outside 0..{self.n_max}")
             self.n[None] = int(n)
+        if zero_mean:
+            self._k_remove_mean(self.b)
         bb, rr = (float(v) for v in self._k_residual())
         if not bb > 0.0:
             if math.isfinite(bb):
@@ -341,6 +359,8 @@ class EllPCG:
                 break
             restarts += 1
         residual = math.sqrt(rr / bb) if math.isfinite(rr) else math.nan
+        if zero_mean:
+            self._k_remove_mean(self.x)
         return iterations, residual, bool(residual <= self.tolerance)
 
 

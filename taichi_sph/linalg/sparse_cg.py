@@ -69,9 +69,15 @@ class SparseCGSolver:
         self.matrix = self.builder.build()
         return self.matrix
 
-    def solve(self, b: np.ndarray, x0: np.ndarray | None = None):
-        """Returns (x, iterations, relative residual, converged)."""
+    def solve(self, b: np.ndarray, x0: np.ndarray | None = None, zero_mean: bool = False):
+        """Returns (x, iterations, relative residual, converged).
+
+        zero_mean: A is singular with the constants as null space (a PPE without a Dirichlet row, whose
+        rows sum to zero): b is projected onto the range of A (its mean removed) and the solution
+        returned is the one of zero mean."""
         A = self.matrix
+        if zero_mean:
+            b = b - b.mean()
         bnorm = float(np.linalg.norm(b))
         if bnorm == 0.0:
             return np.zeros(self.n), 0, 0.0, True
@@ -82,6 +88,8 @@ class SparseCGSolver:
         m = _ITER.search(cap.text)
         iterations = int(m.group(1)) if m else -1
         x = np.asarray(x, dtype=np.float64)
+        if zero_mean:
+            x = x - x.mean()
         residual = float(np.linalg.norm(b - A @ x)) / bnorm
         converged = bool(np.isfinite(residual) and residual <= self.tolerance)
         return x, iterations, residual, converged

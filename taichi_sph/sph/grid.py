@@ -15,12 +15,20 @@ the cells).
 `sort()` only computes `perm`; `reorder()` applies it to any per-particle field. After sorting and
 reordering positions, `build_neighbour_lists()` writes an explicit neighbour list per particle by
 scanning the 3^dim cells around it.
+
+Periodic axes (`period`, the period L of each axis, 0 where the axis is not periodic) span [0, L)
+whatever `lo` and `hi` say: their cell count is floor(L / cell_size), so a cell is at least the
+search radius, and at least 3 (with fewer, the cells on either side of a cell would be one and the same,
+and a pair would be listed twice). Cells wrap around those axes, `sort()` wraps positions past L back
+into [0, L) (they are not deactivated), and distances use the minimum image (`operators.rel`).
 """
 
 import math
 
 import numpy as np
 import taichi as ti
+
+from .operators import rel, wrap
 
 
 class NeighbourOverflowError(RuntimeError):
@@ -48,13 +56,19 @@ def _is_cpu_arch(arch) -> bool:
 class NeighbourGrid:
     """Cell grid, counting sort and explicit neighbour lists for up to `capacity` particles."""
 
-    def __init__(self, capacity: int, dim: int, lo, hi, cell_size: float, max_neighbours: int):
+    def __init__(self, capacity: int, dim: int, lo, hi, cell_size: float, max_neighbours: int, period=None):
         if dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, not {dim}")
-        lo = np.asarray(lo, dtype=float).reshape(-1)
-        hi = np.asarray(hi, dtype=float).reshape(-1)
+        lo = np.asarray(lo, dtype=float).reshape(-1).copy()
+        hi = np.asarray(hi, dtype=float).reshape(-1).copy()
         if lo.size != dim or hi.size != dim:
             raise ValueError(f"lo and hi need {dim} components, got {lo.size} and {hi.size}")
+        period = tuple(float(v) for v in (period if period is not None else [0.0] * dim))
+        if len(period) != dim or any(not (v >= 0.0) for v in period):
+            raise ValueError(f"period needs {dim} values >= 0 (0 = not periodic), got {period}")
+        for d in range(dim):
+            if period[d] > 0.0:
+                lo[d], hi[d] = 0.0, period[d]
         if not np.all(hi > lo):
             raise ValueError(f"grid box is empty: lo={lo.tolist()}, hi={hi.tolist()}")
         if not cell_size > 0.0:
@@ -67,7 +81,16 @@ class NeighbourGrid:
         self.max_neighbours = int(max_neighbours)
         self.lo = lo
         self.hi = hi
-        self.ncell = tuple(max(1, int(math.ceil((hi[d] - lo[d]) / self.cell_size))) for d in range(dim))
+        self.period = period
+        self._any_periodic = any(v > 0.0 for v in period)
+        self.ncell = tuple(int(period[d] // self.cell_size) if period[d] > 0.0
+                           else max(1, int(math.ceil((hi[d] - lo[d]) / self.cell_size))) for d in range(dim))
+        for d in range(dim):
+            if period[d] > 0.0 and self.ncell[d] < 3:
+                raise ValueError(f"periodic axis {d}: the period {period[d]:g} must hold at least 3 cells of "
+                                 f"{self.cell_size:g} (the neighbour search radius)")
+        # cell edge per axis: cell_size, or L / ncell (>= cell_size) along periodic axes
+        self._edge = [period[d] / self.ncell[d] if period[d] > 0.0 else self.cell_size for d in range(dim)]
         self.num_cells = int(np.prod(self.ncell))
         # python floats/ints for ti.static use inside kernels
         self._lo = [float(v) for v in lo]
@@ -102,6 +125,8 @@ class NeighbourGrid:
             if active[i] != 0:
                 inside = 1
                 lin = 0
+                if ti.static(self._any_periodic):
+                    x[i] = wrap(x[i], ti.static(self.period))
                 for d in ti.static(range(self.dim)):
                     p = x[i][d]
                     # NaN fails both comparisons and counts as outside
@@ -109,7 +134,7 @@ class NeighbourGrid:
                         inside = 0
                     ic = 0
                     if inside:
-                        ic = ti.min(ti.cast((p - ti.static(self._lo[d])) / ti.static(self.cell_size), ti.i32),
+                        ic = ti.min(ti.cast((p - ti.static(self._lo[d])) / ti.static(self._edge[d]), ti.i32),
                                     ti.static(self.ncell[d] - 1))
                     lin = lin * ti.static(self.ncell[d]) + ic
                 if inside:
@@ -234,26 +259,37 @@ class NeighbourGrid:
                     rest = rest // ti.static(self.ncell[d])
                 # along the last axis the 3 neighbouring cells are consecutive, so each row of cells
                 # is one contiguous particle range [cell_start[first], cell_start[last + 1])
-                zlo = ti.max(cc[self.dim - 1] - 1, 0)
-                zhi = ti.min(cc[self.dim - 1] + 1, ti.static(self.ncell[self.dim - 1] - 1))
+                # (a periodic last axis takes its 3 cells one by one: they need not be consecutive)
+                last = ti.static(self.dim - 1)
+                zlo = ti.max(cc[last] - 1, 0)
+                zhi = ti.min(cc[last] + 1, ti.static(self.ncell[last] - 1))
                 xi = x[i]
                 for off in ti.static(ti.grouped(ti.ndrange(*([(-1, 2)] * (self.dim - 1))))):
                     ok = 1
                     lin = 0
                     for d in ti.static(range(self.dim - 1)):
                         nd = cc[d] + off[d]
+                        if ti.static(self.period[d] > 0.0):
+                            nd = (nd + ti.static(self.ncell[d])) % ti.static(self.ncell[d])
                         if nd < 0 or nd >= ti.static(self.ncell[d]):
                             ok = 0
                         lin = lin * ti.static(self.ncell[d]) + nd
                     if ok:
-                        lin = lin * ti.static(self.ncell[self.dim - 1])
-                        for j in range(self.cell_start[lin + zlo], self.cell_start[lin + zhi + 1]):
-                            if j != i:
-                                dx = xi - x[j]
-                                if dx.dot(dx) < r2max:
-                                    if cnt < ti.static(self.max_neighbours):
-                                        self.nbr[i, cnt] = j
-                                    cnt += 1
+                        lin = lin * ti.static(self.ncell[last])
+                        for zo in ti.static(range(1 if self.period[last] == 0.0 else 3)):
+                            a = lin + zlo
+                            b = lin + zhi + 1
+                            if ti.static(self.period[last] > 0.0):
+                                z = (cc[last] + zo - 1 + ti.static(self.ncell[last])) % ti.static(self.ncell[last])
+                                a = lin + z
+                                b = lin + z + 1
+                            for j in range(self.cell_start[a], self.cell_start[b]):
+                                if j != i:
+                                    dx = rel(xi, x[j], ti.static(self.period))
+                                    if dx.dot(dx) < r2max:
+                                        if cnt < ti.static(self.max_neighbours):
+                                            self.nbr[i, cnt] = j
+                                        cnt += 1
             self._raw_count[i] = cnt
             if cnt > ti.static(self.max_neighbours):
                 overflow += 1

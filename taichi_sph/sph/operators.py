@@ -39,3 +39,28 @@ def wall_pressure(p_i, rho_w, g, x_w, x_i):
     """Wall pressure seen from fluid particle i: Neumann condition with hydrostatic correction,
     P_w = P_i + rho_w g . (x_w - x_i)."""
     return p_i + rho_w * g.dot(x_w - x_i)
+
+
+@ti.func
+def rel(xi, xj, period: ti.template()):
+    """Pair displacement x_i - x_j, by the minimum image along periodic axes. `period` holds the period L
+    of each axis, 0.0 where the axis is not periodic (a Python tuple: the wrap compiles only for the
+    periodic axes, a scene without them compiles the plain difference)."""
+    d = xi - xj
+    for a in ti.static(range(len(period))):
+        if ti.static(period[a] > 0.0):
+            d[a] -= ti.static(period[a]) * ti.floor(d[a] / ti.static(period[a]) + 0.5)
+    return d
+
+
+@ti.func
+def wrap(x, period: ti.template()):
+    """Position x brought back into [0, L) along each periodic axis (others unchanged)."""
+    y = x
+    for a in ti.static(range(len(period))):
+        if ti.static(period[a] > 0.0):
+            L = ti.static(period[a])
+            y[a] -= L * ti.floor(y[a] / L)
+            if y[a] >= L:  # x = -tiny rounds to L
+                y[a] -= L
+    return y

@@ -81,7 +81,7 @@ def initial_state(cfg, scene, materials: dict) -> dict:
             continue
         rho[sel] = eos.density_np(p[sel], rho0, b, gamma)
     mass = rho * dx**dim
-    vel = np.zeros((scene.n, dim))
+    vel = np.zeros((scene.n, dim)) if scene.velocity is None else np.array(scene.velocity, float)
     if cfg.wcsph.release_velocity == "right_face":
         g_down = max(-g[-1], 0.0)
         x = scene.position

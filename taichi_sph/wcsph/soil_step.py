@@ -22,7 +22,7 @@ import taichi as ti
 
 from .. import guard
 from ..scene import SOIL, WALL, WATER
-from ..sph import kernels
+from ..sph import kernels, operators
 from . import soil, terms
 
 _NRED_S = 6
@@ -91,7 +91,7 @@ class SoilStep:
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
-                    rij = xi - self._pos(sj)
+                    rij = operators.rel(xi, self._pos(sj), self.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * h * h:
                         continue
@@ -163,7 +163,7 @@ class SoilStep:
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
-                    rij = xi - self._pos(sj)
+                    rij = operators.rel(xi, self._pos(sj), self.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * h * h or r2 == 0.0:
                         continue
@@ -179,7 +179,7 @@ class SoilStep:
                         acc -= mj * ((si_r + self.sig[j] / (rhoj * rhoj)) @ gw + pij * gw)
                     elif kj == WALL:
                         # boundary particle: the soil's own stress, extrapolated by its weight (Neumann)
-                        xw = self._pos(sj)
+                        xw = xi - rij  # the wall particle's nearest image
                         # (its equilibrium gradient: the buoyant unit weight (1 - phi_w rho_w / rho_s) rho g
                         # where water fills the pores, whose pressure the pore term below extrapolates)
                         dsig = rhoi * self.g.dot(xw - xi)
@@ -251,7 +251,7 @@ class SoilStep:
                     kj = self.kind[j]
                     if kj != SOIL and kj != WALL:
                         continue
-                    rij = xi - self.x[j]
+                    rij = operators.rel(xi, self.x[j], self.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * h * h:
                         continue
@@ -298,7 +298,7 @@ class SoilStep:
                     j = self.grid.nbr[i, k]
                     if self.kind[j] != WATER:
                         continue
-                    rij = xi - self.x[j]
+                    rij = operators.rel(xi, self.x[j], self.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * h * h:
                         continue

@@ -95,6 +95,9 @@ class WCSPHSolver(SoilStep):
 
         # ti.static switches: a scene compiles only what it uses
         self.n = n = scene.n
+        #: period of each axis (0.0: not periodic), for operators.rel and operators.wrap
+        self.period = scene.periods()
+        self.periodic = any(v > 0.0 for v in self.period)
         self.n_water = scene.count(WATER)
         self.n_air = scene.count(AIR)
         self.n_fluid = self.n_water + self.n_air
@@ -191,7 +194,7 @@ class WCSPHSolver(SoilStep):
         if self.has_soil:
             self.sig.from_numpy(init["stress"].astype(f))
 
-        self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.cell, self.max_nb)
+        self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.cell, self.max_nb, period=self.period)
         self.r_list = 0.0  # list radius at the last build
         self.hmax = self.h0
         self.rebuilds = 0
@@ -313,12 +316,14 @@ class WCSPHSolver(SoilStep):
                 xn = self.x[i] + dt * vh
                 if ti.static(self.xsph_on):
                     xn += dt * self.xs[i]
+                if ti.static(self.periodic):
+                    xn = operators.wrap(xn, self.period)
                 self.x[i] = xn
                 for d in ti.static(range(self.dim)):
                     self.s[i][d] = xn[d]
                     self.s[i][self.S_V + d] = vh[d]
                 self.s[i][self.S_RHO] = self.q[i][self.Q_RHO]
-                dd = xn - self.x0[i]
+                dd = operators.rel(xn, self.x0[i], self.period)
                 ti.atomic_max(d2max, dd.dot(dd))
                 if ti.static(self.variable_h):
                     hi = self.q[i][self.Q_H]
@@ -360,7 +365,7 @@ class WCSPHSolver(SoilStep):
                         if sj[self.S_KIND] == SOIL:
                             continue
                     hij = self._h_pair(hi, sj)
-                    rij = xi - self._pos(sj)
+                    rij = operators.rel(xi, self._pos(sj), self.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * hij * hij or r2 == 0.0:
                         continue
@@ -425,10 +430,10 @@ class WCSPHSolver(SoilStep):
                     j = self.grid.nbr[i, k]
                     if self.kind[j] == WALL:
                         hij = self._h_pair(hi, self.s[j])
-                        r = (xi - self.x[j]).norm()
+                        r = operators.rel(xi, self.x[j], self.period).norm()
                         if r < 2.0 * hij:
                             wij = kernels.w(r, hij, self.dim)
-                            pw = operators.wall_pressure(self.p[i], self.rho[i], self.g, self.x[j], xi)
+                            pw = operators.wall_pressure(self.p[i], self.rho[i], self.g, xi - operators.rel(xi, self.x[j], self.period), xi)
                             ti.atomic_add(self.wnum[j], wij * pw)
                             ti.atomic_add(self.wden[j], wij)
         for i in range(self.n):
@@ -482,7 +487,7 @@ class WCSPHSolver(SoilStep):
                     hij = self.h0
                     if ti.static(self.variable_h):
                         hij = 0.5 * (hi + qj[self.Q_H])
-                    rij = xi - self._pos(sj)
+                    rij = operators.rel(xi, self._pos(sj), self.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * hij * hij or r2 == 0.0:
                         continue
@@ -500,7 +505,7 @@ class WCSPHSolver(SoilStep):
                         beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
                         vij = terms.boundary_relative_velocity(vi, nrm, beta, self.no_slip)
                         mj = rhoi * self.vol0
-                        pw = operators.wall_pressure(pi, rhoi, self.g, self._pos(sj), xi)
+                        pw = operators.wall_pressure(pi, rhoi, self.g, xi - rij, xi)
                         acc += terms.pressure_same_material(mj, pri, pw / (rhoi * rhoi), gw)
                         acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoi, nui, f_ij) * vij
                         if ti.static(self.av_on):
