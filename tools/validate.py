@@ -327,10 +327,12 @@ def _terzaghi(setting):
     return runs, evaluate
 
 
+pending("critical_gradient", "Upward seepage, critical gradient (wcsph_biot)", "(Gs - 1) / (1 + e)",
+        "bracketed within 10 %", "needs an upward-seepage configuration that runs stably: the U-tube tried (reservoir, "
+        "baffle, permeable filter layer) goes unstable at the filter surface under the reservoir (docs/biot.md, "
+        "Not done yet)")
 for _name, _title, _ref, _target in (
-        ("critical_gradient", "Upward seepage, critical gradient (wcsph_biot)", "(Gs - 1) / (1 + e)",
-         "bracketed within 10 %"),
-        ("dupuit", "Dupuit seepage discharge (wcsph_biot)", "q = k (h1^2 - h2^2) / (2 L)", "within 10 %")):
+        ("dupuit", "Dupuit seepage discharge (wcsph_biot)", "q = k (h1^2 - h2^2) / (2 L)", "within 10 %"),):
     pending(_name, _title, _ref, _target, "needs the soil phase of mode wcsph_biot (being added); register the "
             "case with @case once soil particles exist")
 
