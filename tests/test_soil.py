@@ -5,6 +5,7 @@ two resolutions)."""
 import numpy as np
 
 from taichi_sph.io.hdf5 import RunFile
+from taichi_sph.wcsph.consolidation import consolidation_coefficient, isochrone_errors
 
 G = 9.81
 N0, RHO_S, RHO_W = 0.4, 2650.0, 1000.0
@@ -101,23 +102,6 @@ def test_dry_column_collapse(run_cli, tmp_path):
     assert abs(r1 - r2) / r2 < 0.15, results
 
 
-def _water_rows(path):
-    """Water pressure averaged over each starting lattice row, per frame: (times, row heights, pressures)."""
-    with RunFile(path) as rf:
-        water = rf.kind == WATER
-        y0 = rf.field("position", 0)[water][:, 1]
-        row = np.round((y0 - 0.5 * rf.dx) / rf.dx).astype(int)
-        times, ys, ps = [], [], []
-        for k in range(rf.n_frames):
-            f = rf.frame(k)
-            y = f["position"][water][:, 1]
-            p = f["pressure"][water]
-            times.append(f["time"])
-            ys.append(np.array([y[row == r].mean() for r in range(row.max() + 1)]))
-            ps.append(np.array([p[row == r].mean() for r in range(row.max() + 1)]))
-    return np.array(times), np.array(ys), np.array(ps)
-
-
 def test_terzaghi_consolidation(run_cli, tmp_path):
     """configs/consolidation.yaml (seed 002 fig 10): sine start u0 cos(pi y / H), H = 0.4 m (half layer on
     the floor), drained at the top. Exact: u_e / u0 = cos(pi y / H) exp(-pi^2 Tv), Tv = c_v t / H^2,
@@ -135,15 +119,6 @@ def test_terzaghi_consolidation(run_cli, tmp_path):
     r = run_cli("--config", "configs/consolidation.yaml", "--set", "wcsph.soil.initial_excess_pressure.amplitude=0",
                 "--out", base, "--no-progress")
     assert r.returncode == 0, r.stderr
-    t, y, p = _water_rows(out)
-    _, _, p0 = _water_rows(base)
-    u0, half, k = 500.0, 0.4, 5e-3
-    m_oed = 1.0e6 * 0.7 / (1.3 * 0.4)  # E (1 - nu) / ((1 + nu) (1 - 2 nu)), plane strain
-    k_f = RHO_W * 20.0**2
-    cv = k / (RHO_W * G * (1 / m_oed + 1 / k_f))
-    for tv in (0.05, 0.1, 0.2, 0.5):
-        i = int(np.argmin(np.abs(t - tv * half**2 / cv)))
-        soil = y[i] < 0.2
-        ue = (p[i] - p0[i])[soil] / u0
-        exact = np.cos(np.pi * y[i][soil] / half) * np.exp(-np.pi**2 * cv * t[i] / half**2)
-        assert np.abs(ue - exact).max() < 0.08, (tv, np.round(ue, 3), np.round(exact, 3))
+    cv = consolidation_coefficient(5e-3, 1.0e6, 0.3, 20.0)
+    for tv, (err, ue, exact) in isochrone_errors(out, base, 500.0, 0.4, 0.2, cv).items():
+        assert err < 0.08, (tv, np.round(ue, 3), np.round(exact, 3))

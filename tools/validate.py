@@ -320,12 +320,54 @@ def _taylor_green(setting):
     return runs, evaluate
 
 
+TERZAGHI = {"u0": 500.0, "half": 0.4, "soil_top": 0.2, "k": 5e-3, "E": 1.0e6, "nu": 0.3, "c0": 20.0}
+
+
+@case("terzaghi", "Terzaghi consolidation (2D, wcsph_biot)",
+      "exact isochrones u_e / u0 = cos(pi y / H) exp(-pi^2 Tv) of the doubly drained layer (seed 002 fig 10), "
+      "c_v of the model (docs/biot.md)", "isochrones within 3 % (largest |u_e / u0 - exact| at Tv 0.05, 0.1, 0.2, 0.5)",
+      0.03)
+def _terzaghi(setting):
+    # configs/consolidation.yaml in a tank 0.04 m wide (2, 3 and 4 particle columns: the widths that every dx
+    # divides along with the soil's 0.2 m and the water's 0.24 m); each run has a twin without the excess,
+    # run by evaluate (u_e is the difference of the two)
+    dxs = (0.02, 0.04 / 3, 0.01) if setting == "small" else (0.01, 0.005, 0.0025)
+    width = 0.04 if setting == "small" else 0.05
+    runs = [Run("wcsph_biot", dx, "configs/consolidation.yaml",
+                [f"dx={dx:.6g}", f"tank.size=[{width:g}, 0.28]", f"water.0.max=[{width:g}, 0.24]",
+                 f"soil_blocks.0.max=[{width:g}, 0.2]"]) for dx in dxs]
+
+    def evaluate(path, run):
+        from taichi_sph.wcsph.consolidation import (
+            consolidation_coefficient,
+            isochrone_errors,
+        )
+
+        base = Run(run.variant, run.dx, run.config,
+                   [*run.sets, "wcsph.soil.initial_excess_pressure.amplitude=0"], run.args)
+        row = run_one(base, path.parent, timeout=3600.0)
+        if row["rc"] != 0:
+            raise RuntimeError(f"run without the excess: {row['status']}")
+        tz = TERZAGHI
+        cv = consolidation_coefficient(tz["k"], tz["E"], tz["nu"], tz["c0"])
+        try:
+            errs = isochrone_errors(path, Path(row["out"]), tz["u0"], tz["half"], tz["soil_top"], cv)
+        finally:
+            Path(row["out"]).unlink(missing_ok=True)
+        errs = {tv: e for tv, (e, _, _) in errs.items()}
+        out = {"error": max(errs.values()), "twin process s": row["process_seconds"]}
+        out.update({f"Tv {tv:g}": e for tv, e in errs.items()})
+        return out
+
+    return runs, evaluate
+
+
+pending("critical_gradient", "Upward seepage, critical gradient (wcsph_biot)", "(Gs - 1) / (1 + e)",
+        "bracketed within 10 %", "needs an upward-seepage configuration that runs stably: the U-tube tried (reservoir, "
+        "baffle, permeable filter layer) goes unstable at the filter surface under the reservoir (docs/biot.md, "
+        "Not done yet)")
 for _name, _title, _ref, _target in (
-        ("terzaghi", "Terzaghi consolidation (wcsph_biot)", "1D series solution, double drainage",
-         "isochrones within 3 %"),
-        ("critical_gradient", "Upward seepage, critical gradient (wcsph_biot)", "(Gs - 1) / (1 + e)",
-         "bracketed within 10 %"),
-        ("dupuit", "Dupuit seepage discharge (wcsph_biot)", "q = k (h1^2 - h2^2) / (2 L)", "within 10 %")):
+        ("dupuit", "Dupuit seepage discharge (wcsph_biot)", "q = k (h1^2 - h2^2) / (2 L)", "within 10 %"),):
     pending(_name, _title, _ref, _target, "needs the soil phase of mode wcsph_biot (being added); register the "
             "case with @case once soil particles exist")
 
@@ -456,6 +498,11 @@ DIAGNOSES = {
                 "0.27 in T fits both Martin & Moyce series within 4 % at a/40), so the error against the raw data "
                 "does not go to zero with dx. The two modes agree within 0.8 % at a/40 (docs/isph.md, "
                 "\"Dam-break front\").",
+    "terzaghi": "the run decays a little slower than c_v says, first order in dx (fitted order ~1 in the small "
+                "setting): the drained face is a kernel-wide zone where the drag fades (about one smoothing length "
+                "more drainage path), and wall particles extrapolate the pore pressure hydrostatically, so the "
+                "columns beside the side walls feel only part of the excess gradient; the small setting's tank "
+                "is 2-4 particles wide, where that wall error is largest (docs/biot.md, Terzaghi consolidation).",
     "darcy_column": "the slab's core velocity carries the SPH gradient of the uniform surface pressure at "
                     "the slab's two free surfaces.",
     "freefall": "the small setting runs 2-4 cm particles where the seed ran 1 cm: the 20 cm layer is then 5-10 "
