@@ -9,6 +9,7 @@ walls are built outside it. Validation runs before any Taichi kernel is compiled
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated, Literal, Optional, Union
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -353,6 +354,17 @@ class ExcessPorePressure(Strict):
         return self
 
 
+class SoilStartFrom(Strict):
+    """The soil of an earlier run (a geostatic stage) as this run's start: positions, effective stress,
+    plastic strain and density of its soil particles at one frame (docs/biot.md, two-stage runs). Both
+    runs must build the same soil (soil_blocks, dx); water, air and walls come from this config."""
+
+    #: run file of the earlier stage (completed, mode wcsph_biot); relative to the working directory
+    run: str
+    #: its frame to start from (Python index: -1 the last)
+    frame: int = -1
+
+
 class WCSPHSoil(Strict):
     """Soil of mode wcsph_biot (seed 002 sections 2.4 (2) and 2.5): elastic-perfectly-plastic effective
     stress (eq 42-45), compression positive; plane strain in 2D. Seed defaults."""
@@ -390,6 +402,12 @@ class WCSPHSoil(Strict):
     damping: NonNegFloat = 0.0
     #: initial excess pore pressure (consolidation); none by default
     initial_excess_pressure: ExcessPorePressure | None = None
+    #: start from the soil of an earlier run (two-stage runs: a geostatic stage, then the flood); none by
+    #: default (K0 start)
+    start_from: SoilStartFrom | None = None
+    #: hold the soil particles where they are (a rigid porous skeleton: water seeps through it, the soil
+    #: neither moves nor limits the time step); for steady-seepage checks
+    fixed: bool = False
 
 
 class WCSPH(Strict):
@@ -765,6 +783,8 @@ def _check_soil_blocks(cfg: "Config") -> None:
         lo, hi = blk.bounds(cfg.dim, cfg.tank.size)
         _inside(Box(min=lo, max=hi), cfg.tank.size, key)
     soil = cfg.wcsph.soil
+    if soil.start_from is not None and not Path(soil.start_from.run).is_file():
+        _fail("wcsph.soil.start_from.run", f"no run file '{soil.start_from.run}'")
     if soil.tension_cutoff is not None and soil.tan_phi > 0 and soil.tension_cutoff > soil.cohesion / soil.tan_phi:
         _fail("wcsph.soil.tension_cutoff", f"must not exceed cohesion / tan_phi = {soil.cohesion / soil.tan_phi:g} Pa "
               "(beyond it the failure shear stress would be negative)")

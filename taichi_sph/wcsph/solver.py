@@ -190,6 +190,8 @@ class WCSPHSolver(SoilStep):
         self.initial_density = init["density"]
         if self.has_soil:
             self.sig.from_numpy(init["stress"].astype(f))
+            if "plastic_strain" in init:  # two-stage run (stage.py)
+                self.eps_p.from_numpy(init["plastic_strain"].astype(f))
 
         self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.cell, self.max_nb)
         self.r_list = 0.0  # list radius at the last build
