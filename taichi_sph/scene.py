@@ -30,6 +30,7 @@ class Scene:
     hi: np.ndarray
     tank_size: np.ndarray
     markers: dict = field(default_factory=dict)  # soil markers: position, eps0, d50, volume (M,)
+    inflow_rows: list = field(default_factory=list)  # per inflow source, its rows of reserve ids (wcsph/inflow.py)
 
     @property
     def n(self) -> int:
@@ -267,13 +268,21 @@ def build_scene(cfg) -> Scene:
     soil = soil_particles(cfg, wall)
     position, normal = np.concatenate([position, soil]), np.concatenate([normal, np.zeros_like(soil)])
     kind = np.concatenate([kind, np.full(len(soil), SOIL, np.int8)])
+    inflow_rows = []
+    if getattr(cfg, "inflow", None):  # reserve water of the river inflow, held out until released
+        from .wcsph.inflow import inflow_particles
+
+        reserve, rows = inflow_particles(cfg, wall, position[kind != WALL])
+        inflow_rows = [[row + len(position) for row in src] for src in rows]
+        position, normal = np.concatenate([position, reserve]), np.concatenate([normal, np.zeros_like(reserve)])
+        kind = np.concatenate([kind, np.full(len(reserve), WATER, np.int8)])
 
     r_e = SUPPORT_FACTOR * dx
     lo = -(layers + 1) * dx * np.ones(dim)
     hi = size + (layers + 1) * dx
     hi[-1] = size[-1] + max(0.5 * size[-1], 4 * r_e)
     return Scene(dim=dim, dx=dx, position=position, kind=kind, normal=normal, lo=lo, hi=hi, tank_size=size,
-                 markers=build_markers(cfg))
+                 markers=build_markers(cfg), inflow_rows=inflow_rows)
 
 
 def describe(scene: Scene) -> str:

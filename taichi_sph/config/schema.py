@@ -410,6 +410,17 @@ class WCSPHSoil(Strict):
     fixed: bool = False
 
 
+class InflowSource(Box):
+    """River inflow (mode wcsph_biot): a source box above the river filled with water particles that are
+    released row by row, lowest first, at a prescribed volume rate; they start at rest and fall into the
+    river, whose level rises by rate / river width (docs/biot.md)."""
+
+    #: volume of water released per second (m^2/s per metre of levee in 2D, m^3/s in 3D)
+    rate: PosFloat
+    #: time the release starts (s)
+    start: NonNegFloat = 0.0
+
+
 class WCSPH(Strict):
     """Options of mode wcsph_biot (weakly compressible SPH, seed 002)."""
 
@@ -579,6 +590,8 @@ class Config(Strict):
     checkpoint: Checkpoint = Checkpoint()
     #: numbers computed from the finished run, gathered by `taichi-sph sweep` (one column each)
     metrics: list[Metric] = []
+    #: river inflow (mode wcsph_biot): source boxes of water released at a prescribed rate
+    inflow: list[InflowSource] = []
 
     # ---- derived values -------------------------------------------------------------------
     def gravity_vector(self) -> list[float]:
@@ -607,7 +620,7 @@ class Config(Strict):
         if self.wcsph.water.expected_speed is not None:
             return self.wcsph.water.expected_speed
         g = sum(c * c for c in self.gravity_vector()) ** 0.5
-        top = max([box.max[-1] for box in [*self.water, *self.air]]
+        top = max([box.max[-1] for box in [*self.water, *self.air, *self.inflow]]
                   + [blk.bounds(self.dim, self.tank.size)[1][-1] for blk in self.soil_blocks])
         return max((2.0 * g * top) ** 0.5, 1.0e-3)
 
@@ -782,6 +795,12 @@ def _check_soil_blocks(cfg: "Config") -> None:
             _need_len(blk.max, cfg.dim, f"{key}.max")
         lo, hi = blk.bounds(cfg.dim, cfg.tank.size)
         _inside(Box(min=lo, max=hi), cfg.tank.size, key)
+    for k, src in enumerate(cfg.inflow):
+        if cfg.mode != "wcsph_biot":
+            _fail(f"inflow[{k}]", f"an inflow needs mode wcsph_biot (mode is {cfg.mode})")
+        _need_len(src.min, cfg.dim, f"inflow[{k}].min")
+        _need_len(src.max, cfg.dim, f"inflow[{k}].max")
+        _inside(src, cfg.tank.size, f"inflow[{k}]")
     soil = cfg.wcsph.soil
     if soil.start_from is not None and not Path(soil.start_from.run).is_file():
         _fail("wcsph.soil.start_from.run", f"no run file '{soil.start_from.run}'")

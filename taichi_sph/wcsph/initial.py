@@ -71,6 +71,9 @@ def initial_state(cfg, scene, materials: dict) -> dict:
     g = np.asarray(cfg.gravity_vector(), float)
     kind = scene.kind
     fluid = (kind == WATER) | (kind == AIR)
+    for rows in scene.inflow_rows:  # reserve water of an inflow weighs on nothing before its release
+        for row in rows:
+            fluid[row] = False
     rho_ref = np.full(scene.n, materials[WATER][0])
     for k, (rho0, _, _) in materials.items():
         rho_ref[kind == k] = rho0
