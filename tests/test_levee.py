@@ -3,6 +3,7 @@ the river inflow, steady seepage through a rigid levee against Dupuit, and where
 first yields."""
 
 import numpy as np
+import pytest
 
 from taichi_sph.io.hdf5 import RunFile
 
@@ -63,3 +64,79 @@ def test_start_from_errors(run_cli, tmp_path):
     assert r.returncode == 2 and "wcsph.soil.start_from.run" in r.stderr and "same soil" in r.stderr, r.stderr
     assert len([ln for ln in r.stderr.splitlines() if "error" in ln]) == 1, r.stderr
     assert not out.exists()
+
+
+INFLOW_YAML = """\
+mode: wcsph_biot
+dim: 2
+dx: 0.01
+end_time: 1.2
+dt: auto
+output: {path: out/inflow.h5, every: 0.1}
+tank: {size: [0.2, 0.3], boundary: slip}
+water:
+  - {min: [0.0, 0.0], max: [0.2, 0.1]}
+inflow:
+  - {min: [0.0, 0.16], max: [0.05, 0.22], rate: 0.005, start: 0.1}
+probes:
+  - {name: vol, type: water_volume, box: {min: [0.0, 0.0], max: [0.2, 0.3]}, every: 0.02}
+"""
+
+
+def test_inflow_raises_the_level(run_cli, tmp_path):
+    """A source box of 6 rows x 5 particles above a 0.2 m wide, 0.1 m deep river, rate 5e-3 m^2/s from
+    t = 0.1 s: the water volume must follow rate (t - start) rounded down to whole rows (exact: a
+    particle count) until the box is empty (0.003 m^2 at t = 0.7 s); at 1.2 s the water has fallen in
+    and the level must be 0.1 + 0.003 / 0.2 = 0.115 m. Measured: mean surface (top particle of each
+    column + dx / 2) 0.1215 m at 1.2 s, the water still sloshing after the impact (the mean over the
+    columns swings by ~7 mm). Bound dx = 1 cm: the sloshing; the level without the inflow (0.100) lies
+    beyond it."""
+    cfg = tmp_path / "inflow.yaml"
+    cfg.write_text(INFLOW_YAML)
+    out = tmp_path / "in.h5"
+    r = run_cli("--config", cfg, "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    row = 5 * 0.01**2
+    with RunFile(out) as rf:
+        t, vol = rf.probes()["vol"]
+        f = rf.frame(rf.n_frames - 1)
+        water = (rf.kind == WATER) & f["active"]
+        x = f["position"][water]
+    expected = 0.02 + np.minimum(np.floor(np.maximum(0.005 * (t - 0.1), 0.0) / row + 1e-6) * row, 0.003)
+    assert np.allclose(vol, expected, atol=1e-9, rtol=1e-6), np.c_[t, vol, expected][::5]
+    assert x[:, 1].max() < 0.14, x[:, 1].max()  # every released particle has fallen into the river
+    cols = np.floor(x[:, 0] / 0.01).astype(int)
+    level = np.median([x[cols == c, 1].max() + 0.005 for c in np.unique(cols)])
+    assert abs(level - 0.115) < 0.01, level
+
+
+@pytest.mark.xfail(strict=True, reason="the model's discharge is 1.3-1.4 x Dupuit's (dx 0.01: 1.38, dx 0.005: "
+                   "1.31); water above the phreatic line carries flux (docs/biot.md)")
+def test_rigid_levee_seepage_dupuit(run_cli, tmp_path):
+    """configs/levee_seepage.yaml to 1.2 s: the discharge into the downstream basin (the slope of its
+    water volume over 0.6-1.2 s, after the start-up) against Dupuit's q = k (h1^2 - h2^2) / (2 L) with the
+    heads of the same interval (quasi-steady: the reservoir falls ~3 mm/s). Bound 15 % (the acceptance
+    number). Measured: q / q_Dupuit = 1.38 at dx 0.01 (0.5-3 s; the fluxes through three sections of the
+    levee agree within 10 %, so it is steady) and 1.31 at dx 0.005: the pressure along the floor follows
+    Dupuit's head within 1 cm, but the water inside the levee stands 1-2 cm (about one smoothing length)
+    above the zero-pressure line, and that layer carries flux too."""
+    out = tmp_path / "seep.h5"
+    r = run_cli("--config", "configs/levee_seepage.yaml", "--set", "end_time=1.2", "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    k, L = 0.02, 0.15
+    with RunFile(out) as rf:
+        t, vol = rf.probes()["downstream"]
+        heads = []
+        for i in range(rf.n_frames):
+            f = rf.frame(i)
+            if f["time"] < 0.6 - 1e-9:
+                continue
+            x = f["position"][(rf.kind == WATER) & f["active"]]
+            up = (x[:, 0] > 0.1) & (x[:, 0] < 0.5)
+            h1 = np.percentile(x[up, 1], 99.5) + 0.5 * rf.dx
+            h2 = ((x[:, 0] > 0.76).sum() * rf.dx**2) / 0.24  # the basin's volume over its width
+            heads.append(k * (h1**2 - h2**2) / (2 * L))
+    sel = t >= 0.6 - 1e-9
+    q = np.polyfit(t[sel], vol[sel], 1)[0]
+    ratio = q / np.mean(heads)
+    assert abs(ratio - 1) < 0.15, ratio
