@@ -32,6 +32,7 @@ SECTIONS = [("Config", "top level"), ("Output", "output"), ("Images", "output.im
 SECTIONS += [("WCSPH", "wcsph"), ("WCSPHWater", "wcsph.water"), ("WCSPHAir", "wcsph.air"),
              ("ArtificialViscosity", "wcsph.artificial_viscosity")]
 SECTIONS += [("Checkpoint", "checkpoint"), ("Metric", "metrics[k]")]
+SECTIONS += [("WCSPHSoil", "wcsph.soil"), ("SoilStartFrom", "wcsph.soil.start_from"), ("InflowSource", "inflow[k]")]
 
 FOOTER = """## Fixed names
 
