@@ -32,6 +32,7 @@ class Scene:
     markers: dict = field(default_factory=dict)  # soil markers: position, eps0, d50, volume (M,)
     velocity: np.ndarray | None = None  # (N, dim) initial velocity; None: all at rest
     period: tuple = ()  # period L per axis, 0.0 where not periodic (empty: no periodic axis)
+    inflow_rows: list = field(default_factory=list)  # per inflow source, its rows of reserve ids (wcsph/inflow.py)
 
     @property
     def n(self) -> int:
@@ -299,6 +300,14 @@ def build_scene(cfg) -> Scene:
     soil = soil_particles(cfg, wall)
     position, normal = np.concatenate([position, soil]), np.concatenate([normal, np.zeros_like(soil)])
     kind = np.concatenate([kind, np.full(len(soil), SOIL, np.int8)])
+    inflow_rows = []
+    if getattr(cfg, "inflow", None):  # reserve water of the river inflow, held out until released
+        from .wcsph.inflow import inflow_particles
+
+        reserve, rows = inflow_particles(cfg, wall, position[kind != WALL])
+        inflow_rows = [[row + len(position) for row in src] for src in rows]
+        position, normal = np.concatenate([position, reserve]), np.concatenate([normal, np.zeros_like(reserve)])
+        kind = np.concatenate([kind, np.full(len(reserve), WATER, np.int8)])
 
     r_e = SUPPORT_FACTOR * dx
     lo = -(layers + 1) * dx * np.ones(dim)
@@ -312,7 +321,7 @@ def build_scene(cfg) -> Scene:
         velocity = np.zeros_like(position)
         velocity[: len(water_v)] = water_v
     return Scene(dim=dim, dx=dx, position=position, kind=kind, normal=normal, lo=lo, hi=hi, tank_size=size,
-                 markers=build_markers(cfg), velocity=velocity, period=period)
+                 markers=build_markers(cfg), velocity=velocity, period=period, inflow_rows=inflow_rows)
 
 
 def taylor_green_velocity(pts: np.ndarray, size, scale: float) -> np.ndarray:

@@ -33,6 +33,7 @@ SECTIONS += [("WCSPH", "wcsph"), ("WCSPHWater", "wcsph.water"), ("WCSPHAir", "wc
              ("ArtificialViscosity", "wcsph.artificial_viscosity")]
 SECTIONS += [("Checkpoint", "checkpoint"), ("Metric", "metrics[k]")]
 SECTIONS += [("WaterBlock", "water[k] (besides min and max)")]
+SECTIONS += [("WCSPHSoil", "wcsph.soil"), ("SoilStartFrom", "wcsph.soil.start_from"), ("InflowSource", "inflow[k]")]
 
 FOOTER = """## Fixed names
 

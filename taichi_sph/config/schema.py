@@ -9,6 +9,7 @@ walls are built outside it. Validation runs before any Taichi kernel is compiled
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated, Literal, Optional, Union
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -360,6 +361,17 @@ class ExcessPorePressure(Strict):
         return self
 
 
+class SoilStartFrom(Strict):
+    """The soil of an earlier run (a geostatic stage) as this run's start: positions, effective stress,
+    plastic strain and density of its soil particles at one frame (docs/biot.md, two-stage runs). Both
+    runs must build the same soil (soil_blocks, dx); water, air and walls come from this config."""
+
+    #: run file of the earlier stage (completed, mode wcsph_biot); relative to the working directory
+    run: str
+    #: its frame to start from (Python index: -1 the last)
+    frame: int = -1
+
+
 class WCSPHSoil(Strict):
     """Soil of mode wcsph_biot (seed 002 sections 2.4 (2) and 2.5): elastic-perfectly-plastic effective
     stress (eq 42-45), compression positive; plane strain in 2D. Seed defaults."""
@@ -397,6 +409,23 @@ class WCSPHSoil(Strict):
     damping: NonNegFloat = 0.0
     #: initial excess pore pressure (consolidation); none by default
     initial_excess_pressure: ExcessPorePressure | None = None
+    #: start from the soil of an earlier run (two-stage runs: a geostatic stage, then the flood); none by
+    #: default (K0 start)
+    start_from: SoilStartFrom | None = None
+    #: hold the soil particles where they are (a rigid porous skeleton: water seeps through it, the soil
+    #: neither moves nor limits the time step); for steady-seepage checks
+    fixed: bool = False
+
+
+class InflowSource(Box):
+    """River inflow (mode wcsph_biot): a source box above the river filled with water particles that are
+    released row by row, lowest first, at a prescribed volume rate; they start at rest and fall into the
+    river, whose level rises by rate / river width (docs/biot.md)."""
+
+    #: volume of water released per second (m^2/s per metre of levee in 2D, m^3/s in 3D)
+    rate: PosFloat
+    #: time the release starts (s)
+    start: NonNegFloat = 0.0
 
 
 class WCSPH(Strict):
@@ -568,6 +597,8 @@ class Config(Strict):
     checkpoint: Checkpoint = Checkpoint()
     #: numbers computed from the finished run, gathered by `taichi-sph sweep` (one column each)
     metrics: list[Metric] = []
+    #: river inflow (mode wcsph_biot): source boxes of water released at a prescribed rate
+    inflow: list[InflowSource] = []
 
     # ---- derived values -------------------------------------------------------------------
     def gravity_vector(self) -> list[float]:
@@ -596,7 +627,7 @@ class Config(Strict):
         if self.wcsph.water.expected_speed is not None:
             return self.wcsph.water.expected_speed
         g = sum(c * c for c in self.gravity_vector()) ** 0.5
-        top = max([box.max[-1] for box in [*self.water, *self.air]]
+        top = max([box.max[-1] for box in [*self.water, *self.air, *self.inflow]]
                   + [blk.bounds(self.dim, self.tank.size)[1][-1] for blk in self.soil_blocks])
         return max((2.0 * g * top) ** 0.5, 1.0e-3)
 
@@ -803,7 +834,15 @@ def _check_soil_blocks(cfg: "Config") -> None:
             _need_len(blk.max, cfg.dim, f"{key}.max")
         lo, hi = blk.bounds(cfg.dim, cfg.tank.size)
         _inside(Box(min=lo, max=hi), cfg.tank.size, key)
+    for k, src in enumerate(cfg.inflow):
+        if cfg.mode != "wcsph_biot":
+            _fail(f"inflow[{k}]", f"an inflow needs mode wcsph_biot (mode is {cfg.mode})")
+        _need_len(src.min, cfg.dim, f"inflow[{k}].min")
+        _need_len(src.max, cfg.dim, f"inflow[{k}].max")
+        _inside(src, cfg.tank.size, f"inflow[{k}]")
     soil = cfg.wcsph.soil
+    if soil.start_from is not None and not Path(soil.start_from.run).is_file():
+        _fail("wcsph.soil.start_from.run", f"no run file '{soil.start_from.run}'")
     if soil.tension_cutoff is not None and soil.tan_phi > 0 and soil.tension_cutoff > soil.cohesion / soil.tan_phi:
         _fail("wcsph.soil.tension_cutoff", f"must not exceed cohesion / tan_phi = {soil.cohesion / soil.tan_phi:g} Pa "
               "(beyond it the failure shear stress would be negative)")

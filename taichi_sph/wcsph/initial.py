@@ -9,6 +9,8 @@ and the depth of wall particles behind the wall surface.
 - Mass m_i = rho_i dx^dim, so that every particle starts with the lattice volume dx^dim.
 - `release_velocity: right_face`: the rightmost particle column of each water block moves along +x
   with sqrt(2 |g| (H - y)), H the block top (seed section 3.1).
+- `wcsph.soil.start_from`: the soil's positions, stress, plastic strain and density from an earlier
+  run (stage.py); the scene's soil positions are replaced in place.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import numpy as np
 from ..scene import AIR, SOIL, WALL, WATER
 from . import eos
 from .soil import geostatic_stress
+from .stage import apply_stage, load_stage
 
 
 def column_pressure(position: np.ndarray, rho0: np.ndarray, dx: float, g_down: float) -> np.ndarray:
@@ -68,6 +71,9 @@ def initial_state(cfg, scene, materials: dict) -> dict:
     g = np.asarray(cfg.gravity_vector(), float)
     kind = scene.kind
     fluid = (kind == WATER) | (kind == AIR)
+    for rows in scene.inflow_rows:  # reserve water of an inflow weighs on nothing before its release
+        for row in rows:
+            fluid[row] = False
     rho_ref = np.full(scene.n, materials[WATER][0])
     for k, (rho0, _, _) in materials.items():
         rho_ref[kind == k] = rho0
@@ -95,6 +101,9 @@ def initial_state(cfg, scene, materials: dict) -> dict:
     out = {"density": rho, "mass": mass, "velocity": vel, "pressure": p,
            "wall_depth": wall_depth(scene.position, kind, cfg.tank.size, cfg.obstacles)}
     out["stress"] = soil_start(cfg, scene, rho, mass, materials[WATER][0])
+    stage = load_stage(cfg, scene)
+    if stage is not None:  # two-stage run: the soil of the earlier stage (stage.py)
+        out["plastic_strain"] = apply_stage(stage, scene, rho, out["stress"])
     excess_pore_pressure(cfg, scene, p, rho, mass, out["stress"], materials[WATER])
     return out
 

@@ -9,7 +9,7 @@ fluid pair loops skip them. Per step, after the fluid density pass and force pas
    (eq 5, Shepard-normalised).
 2. force pass (`_k_soil_forces`): eq 35 with eq 36, gravity, the pore-pressure force -grad p / rho_s
    (per unit soil mass, the (1 - n) grad p of the mixture theory over the soil's (1 - n) rho_s) and an
-   optional damping.
+   optional damping (`wcsph.soil.fixed`: the skeleton is rigid, its acceleration and drag are zero).
 3. drag passes (`_k_drag_water`, then `_k_drag_soil`): the water's mixture momentum inside the soil
    (pore part n under the water's forces, the rest moving with the soil) and eq 46 between soil and
    water, implicit (docs/biot.md), written to `adrag` which the next kick adds to the acceleration.
@@ -55,6 +55,7 @@ class SoilStep:
         self.alpha_s = sp.alpha
         self.g_over_k = self.g_abs / sp.permeability
         self.damping = sp.damping
+        self.soil_fixed = sp.fixed  # rigid skeleton: no acceleration, no drag on the soil, no soil dt limit
 
     def _soil_fields(self, n):
         ns = n if self.has_soil else 1
@@ -208,6 +209,8 @@ class SoilStep:
                 if ti.static(self.coupled):
                     acc -= gradp / self.rho_g
                 acc -= self.damping * vi
+                if ti.static(self.soil_fixed):
+                    acc = ti.Vector.zero(float, self.dim)
                 self.a[i] = acc
                 vs = vi + 0.5 * dt * acc
                 s2 = vs.dot(vs)
@@ -216,7 +219,8 @@ class SoilStep:
                 an = acc.norm()
                 if an > 0.0:
                     ti.atomic_min(h_over_a, h / an)
-                ti.atomic_min(h_over_c, h / ci)
+                if ti.static(not self.soil_fixed):  # a rigid skeleton carries no waves
+                    ti.atomic_min(h_over_c, h / ci)
                 val = s2 + sigi.sum() + xi.sum() + rhoi
                 if ti.math.isnan(val) or ti.math.isinf(val):
                     bad += 1.0
@@ -313,6 +317,8 @@ class SoilStep:
                     cs = n_s * self.rho_w / self.rho[i] * self.g_over_k * phi
                     q = (ubar - (self.v[i] + dt * self.a[i])) / (1.0 + dt * n_s * (self.g_over_k + cs))
                     ad = cs * q
+                if ti.static(self.soil_fixed):
+                    ad = ti.Vector.zero(float, self.dim)
                 self.adrag[i] = ad
 
     # ------------------------------------------------------------------ host side

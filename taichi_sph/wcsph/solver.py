@@ -40,6 +40,7 @@ from ..scene import AIR, SOIL, WALL, WATER
 from ..sph import kernels, operators
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
 from . import eos, terms
+from .inflow import Inflow, activate
 from .initial import initial_state
 from .soil_step import SoilStep
 
@@ -182,6 +183,12 @@ class WCSPHSolver(SoilStep):
         self.kind.from_numpy(scene.kind.astype(np.int32))
         self.ids.from_numpy(scene.ids)
         self.active.fill(1)
+        self.inflow = None  # river inflow: reserve water released row by row (inflow.py)
+        if scene.inflow_rows:
+            self.inflow = Inflow(cfg, scene.inflow_rows)
+            active = np.ones(n, np.int32)
+            active[self.inflow.reserve_ids()] = 0
+            self.active.from_numpy(active)
         self.v.from_numpy(init["velocity"].astype(f))
         self.rho.from_numpy(init["density"].astype(f))
         self.p.from_numpy(init["pressure"].astype(f))
@@ -193,6 +200,8 @@ class WCSPHSolver(SoilStep):
         self.initial_density = init["density"]
         if self.has_soil:
             self.sig.from_numpy(init["stress"].astype(f))
+            if "plastic_strain" in init:  # two-stage run (stage.py)
+                self.eps_p.from_numpy(init["plastic_strain"].astype(f))
 
         self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.cell, self.max_nb, period=self.period)
         self.r_list = 0.0  # list radius at the last build
@@ -600,7 +609,10 @@ class WCSPHSolver(SoilStep):
         self.step_count += 1
         self.time += dt
         t0 = self._tick("update", t0)
-        if 2.0 * math.sqrt(max(float(d2max), 0.0)) + 2.0 * self.hmax > self.r_list:
+        released = self.inflow.release(self.time - dt, self.time) if self.inflow is not None else ()
+        if len(released):
+            activate(self, released)
+        if len(released) or 2.0 * math.sqrt(max(float(d2max), 0.0)) + 2.0 * self.hmax > self.r_list:
             self.neighbour_search()
         t0 = self._tick("neighbours", t0)
         self._k_density(dt, self.normalised and self.step_count % self.normalise_every == 0)

@@ -1,0 +1,175 @@
+"""Mode wcsph_biot, levees (seed 002 sections 3.4-3.5): two-stage runs (a geostatic stage seeds the next),
+the river inflow, steady seepage through a rigid levee against Dupuit, and where a saturated embankment
+first yields."""
+
+import numpy as np
+import pytest
+
+from taichi_sph.io.hdf5 import RunFile
+
+G = 9.81
+N0, RHO_S, RHO_W = 0.4, 2650.0, 1000.0
+WATER, SOIL = 0, 2
+
+
+def _soil_frame(path, k):
+    with RunFile(path) as rf:
+        soil = rf.kind == SOIL
+        f = rf.frame(k)
+        return f["position"][soil], f["effective_stress"][soil], f["plastic_strain"][soil], rf.dx
+
+
+def test_two_stage_column(run_cli, tmp_path):
+    """configs/soil_column.yaml (saturated, 0.30 m): stage 1 the geostatic stage (K0 start, damping
+    20 1/s, 0.2 s), stage 2 starts from its last frame (`wcsph.soil.start_from`) without damping for
+    0.1 s. Stage 2's start must carry stage 1's end state exactly (positions, stress, plastic strain), with
+    sigma'_v within 5 % of (gamma_sat - gamma_w) z (the acceptance number; measured mean 1.004, range
+    0.999-1.015 below 0.1 m depth, the top rows carry a kernel-truncation error), and the undamped second
+    stage must settle less than 0.5 % of H (measured 8e-7 H)."""
+    s1, s2 = tmp_path / "s1.h5", tmp_path / "s2.h5"
+    r = run_cli("--config", "configs/soil_column.yaml", "--out", s1, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    r = run_cli("--config", "configs/soil_column.yaml", "--set", f"wcsph.soil.start_from.run={s1}",
+                "--set", "wcsph.soil.damping=0", "--set", "end_time=0.1", "--out", s2, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    x1, sig1, ep1, _dx = _soil_frame(s1, -1)
+    x2, sig2, ep2, _ = _soil_frame(s2, 0)
+    # carried over as stored (the run file holds what the solver had)
+    assert np.array_equal(x1, x2) and np.array_equal(sig1, sig2) and np.array_equal(ep1, ep2)
+    H = 0.3
+    with RunFile(s1) as rf:
+        y0 = rf.field("position", 0)[rf.kind == SOIL][:, 1]
+    depth = H - y0
+    deep = depth > 0.1
+    ratio = sig2[deep, 1, 1] / ((1 - N0) * (RHO_S - RHO_W) * G * depth[deep])
+    assert abs(ratio.mean() - 1) < 0.05 and np.abs(ratio - 1).max() < 0.1, (ratio.mean(), ratio.min(), ratio.max())
+    x_end, *_ = _soil_frame(s2, -1)
+    assert np.abs(x2[:, 1] - x_end[:, 1]).max() / H < 0.005
+    assert np.abs(y0 - x_end[:, 1]).max() / H < 0.005  # and over both stages
+
+
+def test_start_from_errors(run_cli, tmp_path):
+    """A missing run file, or one whose soil is not this config's soil: one line naming the key, exit 2,
+    no run file written."""
+    out = tmp_path / "x.h5"
+    r = run_cli("--config", "configs/soil_column.yaml", "--set", f"wcsph.soil.start_from.run={tmp_path}/none.h5",
+                "--out", out, "--no-progress")
+    assert r.returncode == 2 and "wcsph.soil.start_from.run" in r.stderr and "none.h5" in r.stderr, r.stderr
+    assert not out.exists()
+    s1 = tmp_path / "s1.h5"
+    r = run_cli("--config", "configs/soil_column.yaml", "--set", "end_time=0.005", "--out", s1, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    r = run_cli("--config", "configs/soil_column.yaml", "--set", f"wcsph.soil.start_from.run={s1}",
+                "--set", "soil_blocks[0].max=[0.1,0.2]", "--out", out, "--no-progress")
+    assert r.returncode == 2 and "wcsph.soil.start_from.run" in r.stderr and "same soil" in r.stderr, r.stderr
+    assert len([ln for ln in r.stderr.splitlines() if "error" in ln]) == 1, r.stderr
+    assert not out.exists()
+
+
+INFLOW_YAML = """\
+mode: wcsph_biot
+dim: 2
+dx: 0.01
+end_time: 1.2
+dt: auto
+output: {path: out/inflow.h5, every: 0.1}
+tank: {size: [0.2, 0.3], boundary: slip}
+water:
+  - {min: [0.0, 0.0], max: [0.2, 0.1]}
+inflow:
+  - {min: [0.0, 0.16], max: [0.05, 0.22], rate: 0.005, start: 0.1}
+probes:
+  - {name: vol, type: water_volume, box: {min: [0.0, 0.0], max: [0.2, 0.3]}, every: 0.02}
+"""
+
+
+def test_inflow_raises_the_level(run_cli, tmp_path):
+    """A source box of 6 rows x 5 particles above a 0.2 m wide, 0.1 m deep river, rate 5e-3 m^2/s from
+    t = 0.1 s: the water volume must follow rate (t - start) rounded down to whole rows (exact: a
+    particle count) until the box is empty (0.003 m^2 at t = 0.7 s); at 1.2 s the water has fallen in
+    and the level must be 0.1 + 0.003 / 0.2 = 0.115 m. Measured: mean surface (top particle of each
+    column + dx / 2) 0.1215 m at 1.2 s, the water still sloshing after the impact (the mean over the
+    columns swings by ~7 mm). Bound dx = 1 cm: the sloshing; the level without the inflow (0.100) lies
+    beyond it."""
+    cfg = tmp_path / "inflow.yaml"
+    cfg.write_text(INFLOW_YAML)
+    out = tmp_path / "in.h5"
+    r = run_cli("--config", cfg, "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    row = 5 * 0.01**2
+    with RunFile(out) as rf:
+        t, vol = rf.probes()["vol"]
+        f = rf.frame(rf.n_frames - 1)
+        water = (rf.kind == WATER) & f["active"]
+        x = f["position"][water]
+    expected = 0.02 + np.minimum(np.floor(np.maximum(0.005 * (t - 0.1), 0.0) / row + 1e-6) * row, 0.003)
+    assert np.allclose(vol, expected, atol=1e-9, rtol=1e-6), np.c_[t, vol, expected][::5]
+    assert x[:, 1].max() < 0.14, x[:, 1].max()  # every released particle has fallen into the river
+    cols = np.floor(x[:, 0] / 0.01).astype(int)
+    level = np.median([x[cols == c, 1].max() + 0.005 for c in np.unique(cols)])
+    assert abs(level - 0.115) < 0.01, level
+
+
+@pytest.mark.xfail(strict=True, reason="the model's discharge is 1.2-1.4 x Dupuit's (dx 0.01: 1.23-1.38, dx 0.005: "
+                   "1.31); water above the phreatic line carries flux (docs/biot.md)")
+def test_rigid_levee_seepage_dupuit(run_cli, tmp_path):
+    """configs/levee_seepage.yaml to 1.2 s: the discharge into the downstream basin (the slope of its
+    water volume over 0.6-1.2 s, after the start-up) against Dupuit's q = k (h1^2 - h2^2) / (2 L) with the
+    heads of the same interval (quasi-steady: the reservoir falls ~3 mm/s). Bound 15 % (the acceptance
+    number). Measured: q / q_Dupuit = 1.38 at dx 0.01 (0.5-3 s; the fluxes through three sections of the
+    levee agree within 10 %, so it is steady), 1.23 over this test's 0.6-1.2 s, and 1.31 at dx 0.005: the pressure along the floor follows
+    Dupuit's head within 1 cm, but the water inside the levee stands 1-2 cm (about one smoothing length)
+    above the zero-pressure line, and that layer carries flux too."""
+    out = tmp_path / "seep.h5"
+    r = run_cli("--config", "configs/levee_seepage.yaml", "--set", "end_time=1.2", "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    k, L = 0.02, 0.15
+    with RunFile(out) as rf:
+        t, vol = rf.probes()["downstream"]
+        heads = []
+        for i in range(rf.n_frames):
+            f = rf.frame(i)
+            if f["time"] < 0.6 - 1e-9:
+                continue
+            x = f["position"][(rf.kind == WATER) & f["active"]]
+            up = (x[:, 0] > 0.1) & (x[:, 0] < 0.5)
+            h1 = np.percentile(x[up, 1], 99.5) + 0.5 * rf.dx
+            h2 = ((x[:, 0] > 0.76).sum() * rf.dx**2) / 0.24  # the basin's volume over its width
+            heads.append(k * (h1**2 - h2**2) / (2 * L))
+    sel = t >= 0.6 - 1e-9
+    q = np.polyfit(t[sel], vol[sel], 1)[0]
+    ratio = q / np.mean(heads)
+    assert abs(ratio - 1) < 0.15, ratio
+
+
+@pytest.mark.xfail(strict=True, reason="the first particles to yield in stage 2 are at the crest corners and on "
+                   "both slopes' surfaces (e.g. (0.785, 0.145), (0.665, 0.145), (0.985, 0.065)), not at the landside "
+                   "toe: the landside half starts dry and the seepage has not crossed the levee")
+def test_embankment_first_yield_at_landside_toe(run_cli, tmp_path):
+    """configs/embankment.yaml, coarse: stage 1 (`geostatic`, 0.15 s: at rest after 0.05 s, 73 surface
+    particles yield at the K0 start and stop), stage 2 (`saturated`) from its end with k = 2 cm/s for 0.3 s.
+    The first frame in which some particle's plastic strain has grown by more than 1e-3 over stage 1's;
+    its ten most strained particles must lie within 0.1 m of the landside toe (1.15, 0) (seed fig 15:
+    slip failure starts at the landside toe). Measured: the ten most strained are at the crest corners and
+    on the slopes' surfaces (0.18-0.66 m from the landside toe); with a 0.3 s stage 1 the first yield (0.25 s,
+    61 particles) is at the riverside toe's floor row (x 0.31-0.36 m)."""
+    s1, s2 = tmp_path / "e1.h5", tmp_path / "e2.h5"
+    r = run_cli("--config", "configs/embankment.yaml", "--variant", "geostatic", "--set", "end_time=0.15",
+                "--out", s1, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    r = run_cli("--config", "configs/embankment.yaml", "--set", f"wcsph.soil.start_from.run={s1}",
+                "--set", "wcsph.soil.permeability=0.02", "--set", "end_time=0.3", "--out", s2, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    with RunFile(s2) as rf:
+        soil = rf.kind == SOIL
+        x0 = rf.field("position", 0)[soil]
+        e0 = rf.field("plastic_strain", 0)[soil]
+        first = None
+        for i in range(rf.n_frames):
+            de = rf.field("plastic_strain", i)[soil] - e0
+            if (de > 1e-3).any():
+                first = x0[np.argsort(-de)[:10]]
+                break
+    assert first is not None, "no particle yielded in stage 2"
+    dist = np.linalg.norm(first - np.array([1.15, 0.0]), axis=1)
+    assert (dist < 0.1).all(), first
