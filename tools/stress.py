@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import subprocess
 import sys
 import tempfile
 import time
@@ -26,6 +25,9 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tools"))
+from cli_run import run_cli  # noqa: E402  (the tools folder is not a package)
+
 G = 9.81
 MODES = ("isph", "wcsph_biot")
 DT_FACTORS = (0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
@@ -84,19 +86,10 @@ def cells(axes=None) -> list[Cell]:
 
 def run_cell(c: Cell, workdir: Path, timeout: float) -> dict:
     out = workdir / f"{c.axis}-{c.value}-{c.mode}.h5".replace(" ", "_")
-    cmd = [sys.executable, "-m", "taichi_sph.cli", "--config", c.config, "--out", str(out), "--no-progress", "--quiet"]
-    for s in c.sets:
-        cmd += ["--set", s]
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout, check=False)
-        rc, err = proc.returncode, proc.stderr
-    except subprocess.TimeoutExpired:
-        rc, err = -1, ""
-    row = {"axis": c.axis, "value": c.value, "mode": c.mode, "sets": c.sets, "rc": rc,
-           "outcome": CODES.get(rc, f"exit {rc}"), "seconds": time.perf_counter() - t0}
-    lines = [ln.removeprefix("taichi-sph: ") for ln in err.splitlines() if ln.startswith("taichi-sph: ")]
-    row["message"] = lines[-1] if rc not in (0,) and lines else ""
+    res = run_cli(c.config, out, c.sets, timeout=timeout)
+    row = {"axis": c.axis, "value": c.value, "mode": c.mode, "sets": c.sets, "rc": res.rc,
+           "outcome": CODES.get(res.rc, f"exit {res.rc}"), "seconds": res.seconds,
+           "message": res.message if res.rc != 0 else ""}
     if out.exists():
         try:
             row.update(measure(out))
