@@ -31,6 +31,7 @@ from ..linalg.sparse_cg import SparseCGSolver
 from ..scene import WALL, WATER
 from ..sph import kernels, operators
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
+from ..sph.solver_common import SolverCommon
 from . import porosity as _porosity
 
 log = logging.getLogger("taichi_sph")
@@ -40,7 +41,7 @@ _GRAD = {"corrected": GRAD_CORRECTED, "difference": GRAD_DIFFERENCE, "symmetric"
 
 
 @ti.data_oriented
-class ISPHSolver:
+class ISPHSolver(SolverCommon):
     """State and step of mode `isph`. Built from a validated Config and a Scene."""
 
     def __init__(self, cfg, scene):
@@ -695,19 +696,8 @@ class ISPHSolver:
         return ti.Vector([ke, vmax, vol, bad, first_bad, nfree])
 
     # ------------------------------------------------------------------ step
-    def _tick(self, key, t0):
-        t1 = _time.perf_counter()
-        self.timers[key] += t1 - t0
-        return t1
-
     def neighbour_search(self):
-        removed = self.grid.sort(self.x, self.active, self.n)
-        if len(removed):
-            ids = self.ids.to_numpy()[removed]
-            self.removed_total += len(removed)
-            guard.out_of_domain(self.cfg, self.step_count, self.time, ids, self.removed_total)
-        for f in self.particle_fields:
-            self.grid.reorder(f, self.n)
+        self._sort_and_reorder()
         self._k_rows()
         try:
             self.grid.build_neighbour_lists(self.x, self.solve_mask, self.n, self.re, self.ids)

@@ -39,6 +39,7 @@ from ..backend import is_f64
 from ..scene import AIR, SOIL, WALL, WATER
 from ..sph import kernels, operators
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
+from ..sph.solver_common import SolverCommon
 from . import eos, terms
 from .inflow import Inflow, activate
 from .initial import initial_state
@@ -59,7 +60,7 @@ SERIAL_BELOW = 2000
 
 
 @ti.data_oriented
-class WCSPHSolver(SoilStep):
+class WCSPHSolver(SoilStep, SolverCommon):
     """State and step of mode `wcsph_biot` for water and air. Built from a validated Config and a Scene."""
 
     #: per-step diagnostics this solver reports (run.py adds time, dt, wall_seconds, dt_limit)
@@ -565,20 +566,9 @@ class WCSPHSolver(SoilStep):
         self.red_forces[None] = ti.Vector([ke, vmax, vol, h_over_a, h_over_c, bad, first_bad, hmin, vol_air])
 
     # ------------------------------------------------------------------ step
-    def _tick(self, key, t0):
-        t1 = _time.perf_counter()
-        self.timers[key] += t1 - t0
-        return t1
-
     def neighbour_search(self):
         """Sort into cells, reorder every particle array, rebuild the lists with the Verlet skin."""
-        removed = self.grid.sort(self.x, self.active, self.n)
-        if len(removed):
-            ids = self.ids.to_numpy()[removed]
-            self.removed_total += len(removed)
-            guard.out_of_domain(self.cfg, self.step_count, self.time, ids, self.removed_total)
-        for f in self.particle_fields:
-            self.grid.reorder(f, self.n)
+        self._sort_and_reorder()
         self._k_mask()
         self.r_list = min(self.cell, 2.0 * self.hmax + self.skin)
         try:

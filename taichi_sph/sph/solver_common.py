@@ -1,0 +1,30 @@
+"""What the solvers of both modes share outside their kernels: phase timers and the start of a neighbour
+search (cell sort, removal of particles that left the domain, reordering of every particle array)."""
+
+import time as _time
+
+from .. import guard
+
+
+class SolverCommon:
+    """Mixin of ISPHSolver and WCSPHSolver. Expects `cfg`, `grid` (sph.grid.NeighbourGrid), `x`, `active`,
+    `ids`, `n`, `particle_fields` (every per-particle field, reordered together), `timers` (dict of
+    seconds per phase), `removed_total`, `step_count` and `time`."""
+
+    def _tick(self, key: str, t0: float) -> float:
+        """Add the time since t0 to phase `key`; return now (the start of the next phase)."""
+        t1 = _time.perf_counter()
+        self.timers[key] += t1 - t0
+        return t1
+
+    def _sort_and_reorder(self) -> None:
+        """Counting sort into the cells; particles outside the grid are taken out, counted, and reported to
+        the guard (which stops the run or warns, per `guard.out_of_domain`); then every particle array is
+        put in cell order (memory locality of the neighbour loops)."""
+        removed = self.grid.sort(self.x, self.active, self.n)
+        if len(removed):
+            ids = self.ids.to_numpy()[removed]
+            self.removed_total += len(removed)
+            guard.out_of_domain(self.cfg, self.step_count, self.time, ids, self.removed_total)
+        for f in self.particle_fields:
+            self.grid.reorder(f, self.n)
