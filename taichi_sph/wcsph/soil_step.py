@@ -240,7 +240,7 @@ class SoilStep:
                 an = acc.norm()
                 if an > 0.0:
                     ti.atomic_min(h_over_a, h / an)
-                if ti.static(not self.soil_fixed):  # a rigid skeleton carries no waves
+                if ti.static(not self.soil_fixed):  # noqa: SIM102 (compile-time if; a rigid skeleton carries no waves)
                     if not held:
                         ti.atomic_min(h_over_c, h / ci)
                 val = s2 + sigi.sum() + xi.sum() + rhoi
