@@ -101,6 +101,11 @@ def obstacle_particles(box_min, box_max, dx):
     # their normals, normalised (the bisector: a corner particle pushes fluid away from both faces)
     nearest = dist <= dist.min(axis=1, keepdims=True) + 1e-9 * dx
     normal = (nearest[:, dim:].astype(float) - nearest[:, :dim].astype(float))
+    # equally near opposite faces (the middle of an odd-thickness slab) cancel: the first nearest face
+    face = np.argmin(dist, axis=1)
+    lone = np.linalg.norm(normal, axis=1) == 0.0
+    normal[lone] = 0.0
+    normal[lone, face[lone] % dim] = np.where(face[lone] < dim, -1.0, 1.0)
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     return pts, normal
 
