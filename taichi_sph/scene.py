@@ -96,13 +96,17 @@ def obstacle_particles(box_min, box_max, dx):
     d_lo = pts - lo
     d_hi = hi - pts
     dist = np.concatenate([d_lo, d_hi], axis=1)
-    face = np.argmin(dist, axis=1)
     dim = len(lo)
-    normal = np.zeros_like(pts)
-    idx = np.arange(len(pts))
-    axis = face % dim
-    sign = np.where(face < dim, -1.0, 1.0)
-    normal[idx, axis] = sign
+    # the outward normal of the nearest face; at a corner or an edge (equally near faces) the mean of
+    # their normals, normalised (the bisector: a corner particle pushes fluid away from both faces)
+    nearest = dist <= dist.min(axis=1, keepdims=True) + 1e-9 * dx
+    normal = (nearest[:, dim:].astype(float) - nearest[:, :dim].astype(float))
+    # equally near opposite faces (the middle of an odd-thickness slab) cancel: the first nearest face
+    face = np.argmin(dist, axis=1)
+    lone = np.linalg.norm(normal, axis=1) == 0.0
+    normal[lone] = 0.0
+    normal[lone, face[lone] % dim] = np.where(face[lone] < dim, -1.0, 1.0)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     return pts, normal
 
 
@@ -258,6 +262,21 @@ def soil_particles(cfg, wall: np.ndarray) -> np.ndarray:
         pts = pts[remove_overlaps(pts, soil, 0.5 * dx) & remove_overlaps(pts, wall, 0.5 * dx)]
         soil = np.concatenate([soil, pts])
     return soil
+
+
+def soil_block_index(cfg, pts: np.ndarray) -> np.ndarray:
+    """Index into cfg.soil_blocks of the block each soil point belongs to: the first block that holds
+    it (the one `soil_particles` took it from: later blocks skip points of earlier ones); -1 for none."""
+    size = np.asarray(cfg.tank.size, float)
+    out = np.full(len(pts), -1, np.int64)
+    for k, blk in enumerate(getattr(cfg, "soil_blocks", [])):
+        if blk.shape == "box":  # faces included, as lattice_in_box
+            lo, hi = np.asarray(blk.min, float), np.asarray(blk.max, float)
+            mask = np.all((pts >= lo - 1e-9) & (pts <= hi + 1e-9), axis=1)
+        else:
+            mask = inside_region(pts, blk, cfg.dim, size)
+        out[mask & (out < 0)] = k
+    return out
 
 
 def build_scene(cfg) -> Scene:

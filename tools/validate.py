@@ -364,10 +364,38 @@ def _terzaghi(setting):
     return runs, evaluate
 
 
-pending("critical_gradient", "Upward seepage, critical gradient (wcsph_biot)", "(Gs - 1) / (1 + e)",
-        "bracketed within 10 %", "needs an upward-seepage configuration that runs stably: the U-tube tried (reservoir, "
-        "baffle, permeable filter layer) goes unstable at the filter surface under the reservoir (docs/biot.md, "
-        "Not done yet)")
+#: upward seepage in a geometry that every dx of the case divides (multiples of 0.04 m): reservoir 0.04 wide,
+#: baffle 0.08 (at least 3 wall particles thick at every dx), column 0.04 wide; plenum 0.04, rigid base 0.04,
+#: soil column L = 0.16 m, water over it to h2 = 0.28 m, reservoir h1 = 0.44 m (about 0.75 i_c)
+SEEPAGE_SETS = ["tank.size=[0.16, 0.48]", "obstacles.0.min=[0.04, 0.04]", "obstacles.0.max=[0.12, 0.48]",
+                "water.0.max=[0.04, 0.44]", "water.1.min=[0.04, 0.0]", "water.1.max=[0.16, 0.04]",
+                "water.1.start_head=0.44", "water.2.min=[0.12, 0.04]", "water.2.max=[0.16, 0.28]",
+                "soil_blocks.0.min=[0.12, 0.04]", "soil_blocks.0.max=[0.16, 0.08]",
+                "soil_blocks.1.min=[0.12, 0.08]", "soil_blocks.1.max=[0.16, 0.24]"]
+SEEPAGE_COLUMN = [[0.12, 0.08], [0.16, 0.24]]
+
+
+@case("critical_gradient", "Upward seepage, critical gradient (2D, wcsph_biot)",
+      "i_c = (Gs - 1) / (1 + e) = (1 - n) (Gs - 1) = 0.99 (n 0.4, Gs 2.65)",
+      "within 10 % (the gradient at which sigma'_v vanishes)", 0.10)
+def _critical_gradient(setting):
+    # configs/upward_seepage.yaml (U-tube, rigid permeable base) below the critical gradient: the gradient i
+    # from the column's pore pressures and the slope of sigma'_v with depth over gamma', averaged over t >=
+    # 0.15 s; on the line sigma'_v / (gamma' z) = 1 - i / i_c through that point, sigma'_v vanishes at
+    # i_zero = i / (1 - slope ratio): the gradient at which heave starts, compared with i_c
+    dxs = (0.02, 0.04 / 3, 0.01) if setting == "small" else (0.01, 0.005, 0.0025)
+    runs = [Run("wcsph_biot", dx, "configs/upward_seepage.yaml", [f"dx={dx:.6g}", *SEEPAGE_SETS]) for dx in dxs]
+
+    def evaluate(path, run):
+        from taichi_sph.wcsph.seepage import averaged_state
+
+        st = averaged_state(path, SEEPAGE_COLUMN, 0.15)
+        return {"error": abs(st["i_zero"] / st["i_c"] - 1), "i_zero": st["i_zero"], "i measured": st["gradient"],
+                "sigma' slope / gamma'": st["stress_ratio"], "heave mm": 1e3 * st["heave"]}
+
+    return runs, evaluate
+
+
 @case("dupuit", "Dupuit seepage discharge (2D, wcsph_biot, rigid levee)",
       "q = k (h1^2 - h2^2) / (2 L), exact for a rectangular dam with vertical faces (Charny 1951)",
       "discharge within 10 %", 0.10)

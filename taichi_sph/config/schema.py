@@ -58,6 +58,10 @@ class WaterBlock(Box):
     initial_velocity: Literal["rest", "taylor_green"] = "rest"
     #: U of `initial_velocity` (m/s)
     velocity_scale: NonNegFloat = 1.0
+    #: mode wcsph_biot: start the block's particles at the hydrostatic pressure of this free-surface
+    #: height, rho_w |g| (start_head - height) (m), instead of the weight of the fluid above them (a
+    #: plenum under a baffle or a permeable base, fed from a reservoir at that level); default none
+    start_head: float | None = None
 
 
 class SoilRegion(Strict):
@@ -313,6 +317,10 @@ class SoilBlock(Strict):
     #: mound: heights of its base and of its crest (m)
     bottom: float = 0.0
     top: Optional[float] = None
+    #: hold this block's particles where they are (a rigid permeable base: water seeps through it, it
+    #: carries the soil above it); as wcsph.soil.fixed for this block only. Where blocks overlap, the
+    #: particles belong to the first block
+    fixed: bool = False
 
     @model_validator(mode="after")
     def _shape_keys(self):

@@ -6,6 +6,8 @@ and the depth of wall particles behind the wall surface.
   takes the density of the gas EOS (eq 39-40) at that pressure, as the seed sets its bubble from the
   100 kPa overburden plus the water above it; water takes the Tait density (eq 41) at that pressure
   (`initial_density: hydrostatic`) or rho0 (`uniform`, the seed's collapse cases).
+- `water[k].start_head`: that block starts hydrostatic under the given level instead (a plenum fed
+  from a reservoir beside it).
 - Mass m_i = rho_i dx^dim, so that every particle starts with the lattice volume dx^dim.
 - `release_velocity: right_face`: the rightmost particle column of each water block moves along +x
   with sqrt(2 |g| (H - y)), H the block top (seed section 3.1).
@@ -44,6 +46,19 @@ def column_pressure(position: np.ndarray, rho0: np.ndarray, dx: float, g_down: f
     return p
 
 
+def head_pressure(cfg, position: np.ndarray, kind: np.ndarray, p: np.ndarray, rho0: np.ndarray,
+                  g_down: float) -> None:
+    """`water[k].start_head` (in place): water particles of such a block (the first block whose box holds
+    them, faces included, as the blocks are filled) start at rho0 g (start_head - height)."""
+    taken = kind != WATER
+    for blk in cfg.water:
+        lo, hi = np.asarray(blk.min, float), np.asarray(blk.max, float)
+        inside = np.all((position >= lo - 1e-9) & (position <= hi + 1e-9), axis=1) & ~taken
+        if blk.start_head is not None:
+            p[inside] = rho0[inside] * g_down * (blk.start_head - position[inside, -1])
+        taken |= inside
+
+
 def wall_depth(position: np.ndarray, kind: np.ndarray, tank_size, obstacles) -> np.ndarray:
     """d_B of eq 51 for wall particles (0 for others): the distance of a tank-wall particle from the
     tank interior [0, size], or of an obstacle particle from the nearest face of its obstacle."""
@@ -79,6 +94,7 @@ def initial_state(cfg, scene, materials: dict) -> dict:
         rho_ref[kind == k] = rho0
     p = np.zeros(scene.n)
     p[fluid] = column_pressure(scene.position[fluid], rho_ref[fluid], dx, -g[-1])
+    head_pressure(cfg, scene.position, kind, p, rho_ref, -g[-1])
     rho = rho_ref.copy()
     for k, (rho0, b, gamma) in materials.items():
         sel = kind == k

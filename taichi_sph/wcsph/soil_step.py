@@ -56,6 +56,16 @@ class SoilStep:
         self.g_over_k = self.g_abs / sp.permeability
         self.damping = sp.damping
         self.soil_fixed = sp.fixed  # rigid skeleton: no acceleration, no drag on the soil, no soil dt limit
+        # soil blocks held rigid on their own (`soil_blocks[k].fixed`: a permeable base); by particle id
+        self.fixed_ids = np.zeros(0, np.int64)
+        if self.has_soil and not sp.fixed and any(b.fixed for b in cfg.soil_blocks):
+            from ..scene import soil_block_index
+
+            soil_idx = np.nonzero(scene.kind == SOIL)[0]
+            blk = soil_block_index(cfg, scene.position[soil_idx])
+            held = np.array([b.fixed for b in cfg.soil_blocks])[np.maximum(blk, 0)] & (blk >= 0)
+            self.fixed_ids = scene.ids[soil_idx[held]]
+        self.block_fixed = len(self.fixed_ids) > 0
 
     def _soil_fields(self, n):
         ns = n if self.has_soil else 1
@@ -68,6 +78,12 @@ class SoilStep:
         # water acceleration without drag inside the soil (scratch of the drag pass, not carried over)
         self.amix = ti.Vector.field(dim, float, ns)
         self.red_soil = ti.Vector.field(_NRED_S, float, ())
+        # 1 for a particle of a fixed soil block, indexed by particle id (never reordered, no state)
+        self.sfix = ti.field(ti.i32, n if self.block_fixed else 1)
+        if self.block_fixed:
+            held = np.zeros(n, np.int32)
+            held[self.fixed_ids] = 1
+            self.sfix.from_numpy(held)
         self.red_s = np.array([0.0, 0.0, 1e30, 1e30, 0.0, 0.0])
         if self.has_soil:
             self.particle_fields += [self.sig, self.eps_p, self.pore, self.phi_w, self.adrag]
@@ -211,6 +227,11 @@ class SoilStep:
                 acc -= self.damping * vi
                 if ti.static(self.soil_fixed):
                     acc = ti.Vector.zero(float, self.dim)
+                held = False
+                if ti.static(self.block_fixed):
+                    held = self.sfix[self.ids[i]] == 1
+                if held:
+                    acc = ti.Vector.zero(float, self.dim)
                 self.a[i] = acc
                 vs = vi + 0.5 * dt * acc
                 s2 = vs.dot(vs)
@@ -219,8 +240,9 @@ class SoilStep:
                 an = acc.norm()
                 if an > 0.0:
                     ti.atomic_min(h_over_a, h / an)
-                if ti.static(not self.soil_fixed):  # a rigid skeleton carries no waves
-                    ti.atomic_min(h_over_c, h / ci)
+                if ti.static(not self.soil_fixed):  # noqa: SIM102 (compile-time if; a rigid skeleton carries no waves)
+                    if not held:
+                        ti.atomic_min(h_over_c, h / ci)
                 val = s2 + sigi.sum() + xi.sum() + rhoi
                 if ti.math.isnan(val) or ti.math.isinf(val):
                     bad += 1.0
@@ -319,6 +341,9 @@ class SoilStep:
                     ad = cs * q
                 if ti.static(self.soil_fixed):
                     ad = ti.Vector.zero(float, self.dim)
+                if ti.static(self.block_fixed):  # noqa: SIM102 (compile-time if)
+                    if self.sfix[self.ids[i]] == 1:
+                        ad = ti.Vector.zero(float, self.dim)
                 self.adrag[i] = ad
 
     # ------------------------------------------------------------------ host side
