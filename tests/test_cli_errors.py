@@ -57,6 +57,12 @@ CASES = [
     case("ppe-on-failure-bad-choice", ["--set", "isph.ppe.on_failure=ignore"], ["'isph.ppe.on_failure'"]),
     case("surface-density-above-one", ["--set", "isph.surface_density=1.2"], ["'isph.surface_density'"]),
     case("ppe-type-unknown", ["--set", "isph.ppe.type=amg"], ["'isph.ppe.type'"]),
+    # a pore lattice dx eps^(-1/dim) beyond the kernel support (2.4 dx) has no neighbours: 2D floor 0.174
+    case("eps0-below-the-pore-lattice-floor", ["--config", "configs/darcy_column.yaml", "--set",
+                                               "soil.regions.0.eps0=0.1"], ["'soil.regions[0].eps0'", "0.174"]),
+    case("water-porosity-below-the-floor", ["--config", "configs/darcy_column.yaml", "--set",
+                                            "water.0.porosity=0.15"], ["'water[0].porosity'", "kernel support"]),
+    case("start-head-in-isph", ["--set", "water.0.start_head=0.3"], ["'water[0].start_head'", "wcsph_biot"]),
     case("inflow-in-isph", ["--set", "inflow=[{min: [0.0, 0.3], max: [0.1, 0.4], rate: 0.01}]"],
          ["'inflow[0]'", "wcsph_biot"]),
     case("inflow-rate-zero", ["--set", "inflow=[{min: [0.0, 0.3], max: [0.1, 0.4], rate: 0}]"],

@@ -667,6 +667,7 @@ def check(cfg: "Config") -> None:
             lo = [reg.toe[0]] + ([0.0] if d == 3 else []) + [reg.bottom]
             hi = [reg.toe[1]] + ([cfg.tank.size[1]] if d == 3 else []) + [reg.top]
             _inside(Box(min=lo, max=hi), cfg.tank.size, key)
+    _check_pore_lattice(cfg)
     if cfg.soil.marker_spacing is not None and cfg.soil.marker_spacing > 2 * cfg.dx:
         _fail("soil.marker_spacing", f"must be at most 2 dx = {2 * cfg.dx} (markers must resolve the kernel)")
     _check_probes(cfg)
@@ -805,6 +806,28 @@ def _check_periodic(cfg: "Config") -> None:
             _fail(f"water[{k}].initial_velocity", "taylor_green needs dim 2 and tank.periodic [0, 1]")
 
 
+#: kernel support radius over dx, the same as taichi_sph.sph.kernels.SUPPORT_FACTOR (a test keeps them equal;
+#: the schema does not import Taichi, so that bad input is reported before Taichi starts)
+KERNEL_SUPPORT = 2.4
+
+
+def _check_pore_lattice(cfg: Config) -> None:
+    """Water in ground of porosity eps sits on a pore lattice of spacing dx eps^(-1/dim) (eq 33, constant
+    particle mass). At or beyond the kernel support (2.4 dx) a particle there has no neighbour: its density
+    and PPE row are empty and the first step gives NaN. Such a porosity cannot be resolved at any dx."""
+    if cfg.mode != "isph":
+        return
+    floor = KERNEL_SUPPORT ** (-cfg.dim)
+    why = (f"leaves water in the ground on a pore lattice of spacing dx eps^(-1/{cfg.dim}) at or beyond the "
+           f"kernel support ({KERNEL_SUPPORT:g} dx), with no neighbours; it must be above {floor:.3f} in {cfg.dim}D")
+    for k, reg in enumerate(cfg.soil.regions):
+        if reg.eps0 <= floor:
+            _fail(f"soil.regions[{k}].eps0", f"{reg.eps0:g} {why}")
+    for k, block in enumerate(cfg.water):
+        if block.porosity <= floor:
+            _fail(f"water[{k}].porosity", f"{block.porosity:g} {why}")
+
+
 def _check_mode_sections(cfg: Config) -> None:
     """Options of the other mode are errors rather than silently ignored."""
     if cfg.mode == "wcsph_biot":
@@ -826,6 +849,9 @@ def _check_mode_sections(cfg: Config) -> None:
             _fail(keys[0], f"applies to mode wcsph_biot only (mode is {cfg.mode})")
         if cfg.air:
             _fail("air", f"air blocks need mode wcsph_biot (mode is {cfg.mode})")
+        for k, block in enumerate(cfg.water):
+            if block.start_head is not None:
+                _fail(f"water[{k}].start_head", f"applies to mode wcsph_biot only (mode is {cfg.mode})")
 
 
 def _check_soil_blocks(cfg: "Config") -> None:
