@@ -307,9 +307,8 @@ class ISPHSolver:
                     if ti.static(self.porous):
                         if self.eps[i] < 1.0:
                             rho_rest = self.eps[i] * self.rho_w * self.rest_fill[i]
-                    if ti.static(self.surface_density > 0.0):
-                        if n_water > 0 and self.rho_n[i] >= self.surface_density * rho_rest:
-                            is_free = 0
+                    if n_water > 0 and self.surface_density > 0.0 and self.rho_n[i] >= self.surface_density * rho_rest:
+                        is_free = 0
                 self.free[i] = is_free
                 Li = ti.Matrix.identity(float, self.dim)
                 if ti.static(self.grad_mode == GRAD_CORRECTED):
