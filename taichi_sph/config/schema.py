@@ -228,11 +228,10 @@ class ISPH(Strict):
     #: Dirichlet value at free-surface particles: zero (seed) or the hydrostatic pressure at the
     #: centre of a surface particle, rho_w |g| dx / 2 (the particle's top is the surface)
     free_surface_pressure: Literal["half_layer", "zero"] = "half_layer"
-    #: a particle below eq 34's count is free surface only if its number density <rho> is also below
-    #: this fraction of its rest density: rho_w in free water, rho_bar times the rest fill in porous
-    #: ground (the MPS surface test of Koshizuka & Oka 1996, beta = 0.97). The count alone also flags
-    #: particles inside the water whose outermost lattice ring (8 of 20 neighbours in 2D at 2.24 dx,
-    #: r_e = 2.4 dx) has moved out, and in the ground a fifth to a half of a saturated plug; 0 = count only
+    #: free water (eps = 1) only: a particle below eq 34's count is free surface only if its number
+    #: density <rho> is also below this fraction of rho_w (the MPS surface test of Koshizuka & Oka
+    #: 1996, beta = 0.97). The count alone also flags particles inside the water whose outermost
+    #: lattice ring (8 of 20 neighbours in 2D at 2.24 dx, r_e = 2.4 dx) has moved out; 0 = count only
     surface_density: Annotated[float, Field(ge=0, le=1)] = 0.97
     #: pressure gradient: eq 12 difference form with kernel-gradient correction (default),
     #: plain eq 12, or the symmetric eq 13 form

@@ -297,17 +297,10 @@ class ISPHSolver:
                         n_surf = self._table_at(self.nsurf_tab, self.eps[i])
                 if nb < n_surf or n_water == 0:
                     is_free = 1
-                    # a count below N_surf with a full number density is a particle inside the water
-                    # whose outer ring has spread (Koshizuka & Oka's beta test). Full means against
-                    # the rest density: rho_w in free water, rho_bar times the rest fill in the ground
-                    # (the stabilisation term's reference there). Count alone in the ground flagged
-                    # 20-50 % of a saturated plug free: their Dirichlet rows let the water in the
-                    # ground compress by 30 % and pinned its pressure (docs/isph.md)
-                    rho_rest = self.rho_w
-                    if ti.static(self.porous):
-                        if self.eps[i] < 1.0:
-                            rho_rest = self.eps[i] * self.rho_w * self.rest_fill[i]
-                    if n_water > 0 and self.surface_density > 0.0 and self.rho_n[i] >= self.surface_density * rho_rest:
+                    # free water: a count below N_surf with a full number density is a particle
+                    # inside the water whose outer ring has spread (Koshizuka & Oka's beta test)
+                    if n_water > 0 and self.surface_density > 0.0 and self.eps[i] >= 1.0 and \
+                            self.rho_n[i] >= self.surface_density * self.rho_w:
                         is_free = 0
                 self.free[i] = is_free
                 Li = ti.Matrix.identity(float, self.dim)
