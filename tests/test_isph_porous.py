@@ -177,10 +177,11 @@ def test_still_water_over_fine_sand(run_cli, tmp_path):
 def test_permeameter_follows_the_falling_head_ode(run_cli, tmp_path):
     """configs/permeameter.yaml at dx 5 mm (20 particle spacings over the 10 cm plug): the water level
     above the plug follows the quasi-steady ODE (SPEC 5) over the first half of the drainage (h from
-    0.2 to 0.1 m, 0.42 s). Measured: within 3.2 % (largest at the end of that span; +2.5 % at 20 ms is
-    the start from rest, which the ODE does not have). Bound 5 % (the acceptance value). At dx 1 cm
-    the level is 9 % low at 0.42 s: the porosity ramps from 1 to eps0 over the kernel support inside
-    each face of the plug (eq 32), which shortens the plug's effective length by O(dx)."""
+    0.2 to 0.1 m, 0.42 s). Measured: within 2.5 % (+2.5 % at 20 ms is the start from rest, which the
+    ODE does not have; within 1.4 % after 60 ms). Bound 5 % (the acceptance value). This agreement is
+    not converged: the largest deviation is -23 % at dx 1 cm and +16 % at dx 2.5 mm (0.44 s), and a
+    quarter of the plug's particles are flagged free surface by eq 34's count, so the plug holds
+    1.17 eps0 of its volume in water (docs/isph.md, "Surface test in the ground")."""
     from taichi_sph.isph.porosity import falling_head_level
 
     out = tmp_path / "pm.h5"
@@ -211,8 +212,9 @@ def test_freefall_coarse_volume_and_fraction_in_layer(run_cli, tmp_path):
       not drain or water that falls through it freely (0.2 m at g/eps) is far outside;
     - fraction of the water inside the layer (0.20 <= z <= 0.40) at that moment 0.32, seed "about
       eps0": bound |f - 0.3| < 0.1, the acceptance value (the layer is 10 spacings deep at 2 cm);
-    - water volume measure (sum of m eps / <rho>, docs/output.md) at 2.5 s against t = 0: +1.06 %.
-      The acceptance target is 1 %, which this misses; the bound 1.5 % holds the measured value. On
+    - water volume measure (sum of m eps / <rho>, docs/output.md) at 2.5 s against t = 0: +1.06 %
+      and +0.98 % in two runs (+1.9 % at 2.45 s in the second: the measure is not settled). The
+      acceptance target is 1 %, which this misses; the bound 1.5 % holds the measured values. On
       the way the measure dips to -6.5 % (0.52 s) while the water passes through the ground
       (docs/freefall.md); bound 8 %, which a loss of the water entering the ground would exceed."""
     out = tmp_path / "ff.h5"

@@ -300,7 +300,8 @@ class ISPHSolver(SolverCommon):
                     is_free = 1
                     # free water: a count below N_surf with a full number density is a particle
                     # inside the water whose outer ring has spread (Koshizuka & Oka's beta test)
-                    if n_water > 0 and self.eps[i] >= 1.0 and self.rho_n[i] >= self.surface_density * self.rho_w:
+                    if n_water > 0 and self.surface_density > 0.0 and self.eps[i] >= 1.0 and \
+                            self.rho_n[i] >= self.surface_density * self.rho_w:
                         is_free = 0
                 self.free[i] = is_free
                 Li = ti.Matrix.identity(float, self.dim)
