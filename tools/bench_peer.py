@@ -45,13 +45,13 @@ import json, math, sys, time
 from pysph.examples.dam_break_2d import DamBreak2D, ro
 
 dx, steps, until, out, outdir = float(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3]), sys.argv[4], sys.argv[5]
-WARMUP = int(sys.argv[6])
+WARMUP, AS_SHIPPED, EXTRA = int(sys.argv[6]), sys.argv[7] == "1", sys.argv[8].split()
 
 
 class DamBreakAtDx(DamBreak2D):
     def create_particles(self):
         particles = super().create_particles()
-        for pa in particles:  # the example takes h and m from its module-level dx = 0.03
+        for pa in [] if AS_SHIPPED else particles:  # the example takes h and m from its module-level dx = 0.03
             pa.h[:] = self.h
             pa.m[:] = ro * self.dx ** 2
         return particles
@@ -65,7 +65,7 @@ class DamBreakAtDx(DamBreak2D):
 app = DamBreakAtDx(output_dir=outdir)
 app.dts = []
 app.setup(["--openmp", "--dx", str(dx), "--max-steps", str(WARMUP), "--tf", "100", "--disable-output",
-           "--pfreq", "100000000", "-q"])
+           "--pfreq", "100000000", "-q", *EXTRA])
 fluid = [pa for pa in app.particles if pa.name == "fluid"][0]
 app.solver.solve(False)  # warm-up: neighbour structures built, caches filled
 app.dts.clear()
@@ -78,7 +78,10 @@ t0 = time.perf_counter()
 app.solver.solve(False)
 wall = time.perf_counter() - t0
 x = fluid.get("x")
-json.dump({"water_particles": int(fluid.get_number_of_particles()), "all_particles":
+import Cython, compyle, numpy, pysph
+versions = {"pysph": pysph.__version__, "compyle": compyle.__version__, "cython": Cython.__version__,
+            "numpy": numpy.__version__}
+json.dump({"versions": versions, "water_particles": int(fluid.get_number_of_particles()), "all_particles":
            int(sum(pa.get_number_of_particles() for pa in app.particles)), "h_over_dx": float(fluid.h[0] / dx),
            "steps": int(app.solver.count) - WARMUP, "wall_seconds": wall, "simulated_time": float(app.solver.t),
            "dt_min": min(app.dts), "dt_max": max(app.dts),
@@ -107,14 +110,14 @@ def _child(cmd, env, cwd=None) -> tuple:
     return r, lines
 
 
-def run_pysph(python: str, dx: float, steps: int, until: float, threads: int) -> dict:
+def run_pysph(python: str, dx: float, steps: int, until: float, threads: int, as_shipped=False, extra="") -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         script = Path(tmp) / "pysph_dam_break.py"
         script.write_text(PYSPH_CHILD)
         out = Path(tmp) / "pysph.json"
         env = dict(os.environ, OMP_NUM_THREADS=str(threads))
         r, lines = _child([python, str(script), str(dx), str(steps), str(until), str(out), str(Path(tmp) / "out"),
-                           str(WARMUP)], env)
+                           str(WARMUP), "1" if as_shipped else "0", extra], env)
         if r.returncode != 0 or not out.exists():
             progress = [line for line in lines if line.startswith("progress")]
             errors = [line for line in lines if "Error" in line] or lines or [""]
@@ -143,6 +146,9 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=1, help="alternate the two codes this many times, keep the fastest")
     ap.add_argument("--precision", default="f32", choices=["f32", "f64"], help="ours (PySPH runs f64)")
     ap.add_argument("--pysph-python", default=sys.executable)
+    ap.add_argument("--pysph-as-shipped", action="store_true",
+                    help="keep the example's h and m of dx 0.03 (shows what it does at another --dx)")
+    ap.add_argument("--pysph-args", default="", help="more options for PySPH's application, e.g. '--nnps sfc'")
     ap.add_argument("--skip-pysph", action="store_true", help="ours only (e.g. a long --until run)")
     ap.add_argument("--json", help="also write the results to this file")
     args = ap.parse_args(argv)
@@ -158,7 +164,8 @@ def main(argv=None) -> int:
             runs = [] if args.skip_pysph else ["PySPH dam_break_2d"]
             for name in [*runs, ours_name]:
                 r = (run_ours(dx, args.steps, args.until, args.threads, args.precision) if name == ours_name
-                     else run_pysph(args.pysph_python, dx, args.steps, args.until, args.threads))
+                     else run_pysph(args.pysph_python, dx, args.steps, args.until, args.threads,
+                                    args.pysph_as_shipped, args.pysph_args))
                 r["load_average_after"] = os.getloadavg()[0]
                 if "error" not in r:
                     r["rate"] = r["water_particles"] * r["steps"] / r["wall_seconds"]
@@ -169,6 +176,12 @@ def main(argv=None) -> int:
           f"{os.getloadavg()[0]:.1f} at end; " + (f"every step to t = {args.until:g} s" if args.until > 0 else
                                                     f"{args.steps} steps") + f" after {WARMUP} warm-up steps"
           + (f"; fastest of {args.repeat}" if args.repeat > 1 else ""))
+    for dx, best in table:
+        v = best.get("PySPH dam_break_2d", {}).get("versions")
+        if v:
+            print(f"PySPH at dx {dx:g}: " + ", ".join(f"{k} {x}" for k, x in v.items()) +
+                  f"; h = {best['PySPH dam_break_2d']['h_over_dx']:.2f} dx"
+                  + (f"; options {args.pysph_args}" if args.pysph_args else ""))
     print()
     print("| dx | code | water particles | steps | simulated s | wall s | ms/step | M particle-steps/s | "
           "simulated s per wall s | dt min / max (us) | front x (m) |")
