@@ -15,7 +15,8 @@ made its particles (nothing else of the example is changed).
 
 Timing: setup and compilation are excluded on both sides (PySPH compiles its generated code in
 `setup()`, which is not timed; ours compiles in its warm-up); both take 5 warm-up steps first,
-PySPH with output disabled (`--disable-output`, no progress bar). Either a fixed number of steps
+PySPH with output disabled (`--disable-output`, no progress bar) and OMP_WAIT_POLICY=passive
+unless the environment sets it. Either a fixed number of steps
 (`--steps`) or every step up to a simulated time (`--until`, a stability run: smallest step, surge
 front, i.e. the largest x of any water particle, at the end). `--repeat` alternates the two codes
 that many times and keeps each one's fastest run (the machine may be shared). Reported: water
@@ -23,7 +24,8 @@ particles, steps, wall seconds, M particle-steps/s (water particles x steps / wa
 simulated seconds per wall second, and our rate over PySPH's.
 
     python tools/bench_peer.py [--dx 0.01 0.005] [--steps 200 | --until 0.5] [--threads 2]
-                               [--repeat 1] [--pysph-python PATH] [--json FILE]
+                               [--repeat 1] [--pysph-python PATH] [--pysph-args=--cache-nnps]
+                               [--pysph-as-shipped] [--skip-pysph] [--json FILE]
 
 `--pysph-python` names the Python that has PySPH installed (default: this one); when PySPH cannot
 be imported there or its run fails, the reason is printed in its row and the script exits 1.
@@ -115,7 +117,10 @@ def run_pysph(python: str, dx: float, steps: int, until: float, threads: int, as
         script = Path(tmp) / "pysph_dam_break.py"
         script.write_text(PYSPH_CHILD)
         out = Path(tmp) / "pysph.json"
+        # idle OpenMP threads sleep instead of spinning: on a machine where other processes run, spinning
+        # threads cost PySPH 2.5x (measured: 0.63 against 0.25 M particle-steps/s at 20k, 2 threads)
         env = dict(os.environ, OMP_NUM_THREADS=str(threads))
+        env.setdefault("OMP_WAIT_POLICY", "passive")
         r, lines = _child([python, str(script), str(dx), str(steps), str(until), str(out), str(Path(tmp) / "out"),
                            str(WARMUP), "1" if as_shipped else "0", extra], env)
         if r.returncode != 0 or not out.exists():
@@ -148,7 +153,8 @@ def main(argv=None) -> int:
     ap.add_argument("--pysph-python", default=sys.executable)
     ap.add_argument("--pysph-as-shipped", action="store_true",
                     help="keep the example's h and m of dx 0.03 (shows what it does at another --dx)")
-    ap.add_argument("--pysph-args", default="", help="more options for PySPH's application, e.g. '--nnps sfc'")
+    ap.add_argument("--pysph-args", default="",
+                    help="more options for PySPH's application, e.g. --pysph-args=--cache-nnps")
     ap.add_argument("--skip-pysph", action="store_true", help="ours only (e.g. a long --until run)")
     ap.add_argument("--json", help="also write the results to this file")
     args = ap.parse_args(argv)
@@ -181,7 +187,8 @@ def main(argv=None) -> int:
         if v:
             print(f"PySPH at dx {dx:g}: " + ", ".join(f"{k} {x}" for k, x in v.items()) +
                   f"; h = {best['PySPH dam_break_2d']['h_over_dx']:.2f} dx"
-                  + (f"; options {args.pysph_args}" if args.pysph_args else ""))
+                  + (f"; options {args.pysph_args}" if args.pysph_args else "")
+                  + f"; OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY', 'passive')}")
     print()
     print("| dx | code | water particles | steps | simulated s | wall s | ms/step | M particle-steps/s | "
           "simulated s per wall s | dt min / max (us) | front x (m) |")
