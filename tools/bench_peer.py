@@ -194,6 +194,7 @@ def main(argv=None) -> int:
           "simulated s per wall s | dt min / max (us) | front x (m) |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|---|---:|")
     ok = True
+    ratios = []
     for dx, best in table:
         for name, r in best.items():
             if "error" in r:
@@ -209,8 +210,11 @@ def main(argv=None) -> int:
                   f"{r['rate'] / 1e6:.2f} | {sim_rate} | {dts} | {front} |")
         if ours_name in best and "PySPH dam_break_2d" in best and "rate" in best[ours_name] \
                 and "rate" in best["PySPH dam_break_2d"]:
-            print(f"\ndx {dx:g}: ours / PySPH = {best[ours_name]['rate'] / best['PySPH dam_break_2d']['rate']:.2f} "
-                  "(particle-steps per second)")
+            ratios.append(f"dx {dx:g}: ours / PySPH = "
+                          f"{best[ours_name]['rate'] / best['PySPH dam_break_2d']['rate']:.2f} (particle-steps per second)")
+    if ratios:
+        print()
+        print("\n".join(ratios))
     if args.json:
         Path(args.json).write_text(json.dumps({"machine": machine(), "threads": args.threads, "load_average": load0,
                                                "results": {str(dx): best for dx, best in table}}, indent=2))
