@@ -61,14 +61,15 @@ class DamBreakAtDx(DamBreak2D):
     def post_step(self, solver):
         self.dts.append(solver.dt)
         if solver.count % 500 == 0:
-            print("progress", solver.count, solver.t, flush=True)
+            x, y = self.fluid.get("x", "y")
+            print("progress", solver.count, solver.t, solver.dt, x.min(), x.max(), y.min(), y.max(), flush=True)
 
 
 app = DamBreakAtDx(output_dir=outdir)
 app.dts = []
 app.setup(["--openmp", "--dx", str(dx), "--max-steps", str(WARMUP), "--tf", "100", "--disable-output",
            "--pfreq", "100000000", "-q", *EXTRA])
-fluid = [pa for pa in app.particles if pa.name == "fluid"][0]
+fluid = app.fluid = [pa for pa in app.particles if pa.name == "fluid"][0]
 app.solver.solve(False)  # warm-up: neighbour structures built, caches filled
 app.dts.clear()
 if until > 0:
@@ -124,11 +125,15 @@ def run_pysph(python: str, dx: float, steps: int, until: float, threads: int, as
         r, lines = _child([python, str(script), str(dx), str(steps), str(until), str(out), str(Path(tmp) / "out"),
                            str(WARMUP), "1" if as_shipped else "0", extra], env)
         if r.returncode != 0 or not out.exists():
-            progress = [line for line in lines if line.startswith("progress")]
-            errors = [line for line in lines if "Error" in line] or lines or [""]
-            where = f" (last progress: step {progress[-1].split()[1]}, t {float(progress[-1].split()[2]):.4f} s)" \
-                if progress else ""
-            return {"error": f"exit {r.returncode}: {errors[-1][:160]}{where}"}
+            progress = [line.split()[1:] for line in lines if line.startswith("progress")]
+            errors = [line for line in lines if "Error" in line] or [line for line in lines if "progress" not in line]
+            what = errors[-1][:160] if errors else ("segmentation fault" if r.returncode == -11 else "")
+            where = ""
+            if progress:
+                n, t, dt, x0, x1, y0, y1 = map(float, progress[-1])
+                where = (f"; last seen at step {n:.0f}, t {t:.4f} s: dt {1e6 * dt:.1f} us, water in x {x0:.3f}..{x1:.3f}, "
+                         f"y {y0:.3f}..{y1:.3f} m")
+            return {"error": f"exit {r.returncode}: {what}{where}", "progress": progress}
         return json.loads(out.read_text())
 
 
