@@ -126,8 +126,9 @@ def run_pysph(python: str, dx: float, steps: int, until: float, threads: int, as
                            str(WARMUP), "1" if as_shipped else "0", extra], env)
         if r.returncode != 0 or not out.exists():
             progress = [line.split()[1:] for line in lines if line.startswith("progress")]
-            errors = [line for line in lines if "Error" in line] or [line for line in lines if "progress" not in line]
-            what = errors[-1][:160] if errors else ("segmentation fault" if r.returncode == -11 else "")
+            errors = [line for line in lines if "Error" in line]
+            what = errors[-1][:160] if errors else "signal 11, segmentation fault" if r.returncode == -11 \
+                else (lines or [""])[-1][:160]
             where = ""
             if progress:
                 n, t, dt, x0, x1, y0, y1 = map(float, progress[-1])
