@@ -31,7 +31,10 @@ sys.path.insert(0, str(ROOT / "tools"))
 from bench import machine
 
 
-def bench_case(dx: float, steps: int, warmup: int, overrides=()) -> dict:
+def bench_case(dx: float, steps: int, warmup: int, overrides=(), until: float | None = None) -> dict:
+    """Time `steps` steps after `warmup` ones; with `until`, time every step from the warm-up on up to that
+    simulated time instead (stability over a whole run: smallest and largest step, the surge front, i.e.
+    the largest x of any water particle, at the end)."""
     from taichi_sph.config import load_config
     from taichi_sph.run import TimeStepper
     from taichi_sph.scene import build_scene
@@ -51,16 +54,37 @@ def bench_case(dx: float, steps: int, warmup: int, overrides=()) -> dict:
     rebuilds0 = solver.rebuilds
     chunk = max(1, steps // 10)
     chunks = []
+    dts = []
     cpu0 = time.process_time()
-    for _ in range(0, steps, chunk):
-        t0 = time.perf_counter()
-        for _ in range(chunk):
-            solver.step(stepper.choose(0.0, solver.propose_dt())[0])
-        chunks.append(time.perf_counter() - t0)
+    if until is not None:
+        chunk = 100
+        while solver.time < until:
+            t0 = time.perf_counter()
+            for _ in range(chunk):
+                dt = stepper.choose(0.0, solver.propose_dt())[0]
+                dts.append(dt)
+                solver.step(dt)
+                if solver.time >= until:
+                    break
+            chunks.append(time.perf_counter() - t0)
+    else:
+        for _ in range(0, steps, chunk):
+            t0 = time.perf_counter()
+            for _ in range(chunk):
+                solver.step(stepper.choose(0.0, solver.propose_dt())[0])
+            chunks.append(time.perf_counter() - t0)
     cpu = time.process_time() - cpu0
-    steps = chunk * len(chunks)
+    steps = len(dts) if until is not None else chunk * len(chunks)
+    run_extra = {}
+    if until is not None:
+        from taichi_sph.scene import WATER
+
+        n = solver.n
+        water = solver.kind.to_numpy()[:n] == WATER
+        run_extra = {"dt_min": min(dts), "dt_max": max(dts), "front_x": float(solver.x.to_numpy()[:n][water, 0].max()),
+                     "tank_length": float(solver.cfg.tank.size[0])}
     wall = sum(chunks)
-    best = min(chunks) / chunk
+    best = min(chunks[:-1] or chunks) / chunk  # the last chunk of a run to `until` may be short
     return {
         "case": "dam break 2D", "dx": dx, "fluid_particles": solver.n_fluid, "all_particles": solver.n,
         "steps": steps, "simulated_time_at_end": solver.time, "seconds_per_step": wall / steps,
@@ -70,6 +94,7 @@ def bench_case(dx: float, steps: int, warmup: int, overrides=()) -> dict:
         "steps_per_rebuild": steps / max(solver.rebuilds - rebuilds0, 1),
         "phase_seconds_per_step": {k: v / steps for k, v in solver.timers.items()},
         "setup_and_warmup_seconds": setup,
+        **run_extra,
     }
 
 
