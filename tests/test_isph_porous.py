@@ -212,9 +212,11 @@ def test_freefall_coarse_volume_and_fraction_in_layer(run_cli, tmp_path):
       not drain or water that falls through it freely (0.2 m at g/eps) is far outside;
     - fraction of the water inside the layer (0.20 <= z <= 0.40) at that moment 0.32, seed "about
       eps0": bound |f - 0.3| < 0.1, the acceptance value (the layer is 10 spacings deep at 2 cm);
-    - water volume measure (sum of m eps / <rho>, docs/output.md) at 2.5 s against t = 0: +1.06 %
-      and +0.98 % in two runs (+1.9 % at 2.45 s in the second: the measure is not settled). The
-      acceptance target is 1 %, which this misses; the bound 1.5 % holds the measured values. On
+    - water volume measure (sum of m eps / <rho>, docs/output.md) against t = 0, averaged over the
+      last 0.25 s: +0.75 %. The single last sample scatters by about +-0.7 % around it as the pool
+      sloshes (+0.98, +1.06, +1.28 % in three runs; two threads do not repeat bit for bit), so a test
+      on it alone was flaky. Bound 1.5 %, twice the measured mean: the acceptance target is 1 %, and
+      one run's mean does not establish that it holds in every run. On
       the way the measure dips to -6.5 % (0.52 s) while the water passes through the ground
       (docs/freefall.md); bound 8 %, which a loss of the water entering the ground would exceed."""
     out = tmp_path / "ff.h5"
@@ -239,5 +241,6 @@ def test_freefall_coarse_volume_and_fraction_in_layer(run_cli, tmp_path):
     frac_at = frac[k - 1] + s * (frac[k] - frac[k - 1])
     assert abs(frac_at - 0.3) < 0.1, frac_at
     vol = d["water_volume"] / d["water_volume"][0] - 1.0
-    assert abs(vol[-1]) < 0.015, vol[-1]
+    settled = d["time"] >= d["time"][-1] - 0.25
+    assert abs(vol[settled].mean()) < 0.015, vol[settled].mean()
     assert np.max(np.abs(vol)) < 0.08, vol.min()
