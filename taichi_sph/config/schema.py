@@ -220,7 +220,8 @@ class PPESolver(Strict):
     #: 1e-5 (f32 CG stalls near 1e-5 relative residual), else the run's precision
     precision: Literal["auto", "f32", "f64"] = "auto"
     #: ell_pcg only: off-diagonal entries a row can hold (default: 1.5 x the kernel's lattice
-    #: neighbour count, 30 in 2D and 84 in 3D, at most `neighbours.max`)
+    #: neighbour count, 30 in 2D and 84 in 3D, at most `neighbours.max`); a row that needs more
+    #: widens the matrix during the run (with a warning)
     width: Optional[PosInt] = None
 
 

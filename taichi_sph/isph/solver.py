@@ -87,6 +87,7 @@ class ISPHSolver(SolverCommon):
         self.periodic = any(v > 0.0 for v in self.period)
         n = self.n
         self.max_nb = cfg.max_neighbours()
+        self.ppe_widenings = 0  # times the ELL PPE matrix was widened after a row overflow
         vec = ti.types.vector(dim, float)
         self.x = ti.Vector.field(dim, float, n)
         self.v = ti.Vector.field(dim, float, n)
@@ -422,15 +423,16 @@ class ISPHSolver(SolverCommon):
         self._assemble(A)
 
     @ti.kernel
-    def _k_assemble_ell(self):
-        """The PPE into the ELL matrix of EllPCG (isph.ppe.type ell_pcg)."""
-        self._assemble(0)
+    def _k_assemble_ell(self, ell: ti.template()):
+        """The PPE into the ELL matrix of EllPCG `ell` (isph.ppe.type ell_pcg); a template argument, so
+        that a wider matrix after a row overflow compiles its own kernel."""
+        self._assemble(ell)
 
     @ti.func
     def _ppe_add(self, A: ti.template(), i, j, v):
         """A[i, j] += v in the PPE matrix of the configured solver (only row i's thread writes row i)."""
         if ti.static(self.ppe_ell):
-            self.ppe.add(i, j, v)
+            A.add(i, j, v)
         else:
             A[i, j] += v
             ti.atomic_add(self.triplets[None], 1)
@@ -457,7 +459,7 @@ class ISPHSolver(SolverCommon):
             if self.kind[i] == WATER:
                 ri = self.row[i]
                 if ti.static(self.ppe_ell):
-                    self.ppe.start_row(ri)
+                    A.start_row(ri)
                 if self.solve_mask[i] == 1 and self.free[i] == 0:
                     xi = self.x[i]
                     k_i = self.kcoef[i]
@@ -503,11 +505,19 @@ class ISPHSolver(SolverCommon):
                         stab /= self.drag[i]
                     source = div + stab
                     self._ppe_add(A, ri, ri, diag)
-                    self.b[ri] = ti.cast(rhs - source, self.b.dtype)
+                    self._set_rhs(A, ri, rhs - source)
                 else:
                     ti.atomic_add(self.dirichlet_rows[None], 1)
                     self._ppe_add(A, ri, ri, dirichlet_diag)
-                    self.b[ri] = ti.cast(dirichlet_diag * self._dirichlet_value(i), self.b.dtype)
+                    self._set_rhs(A, ri, dirichlet_diag * self._dirichlet_value(i))
+
+    @ti.func
+    def _set_rhs(self, A: ti.template(), ri, v):
+        """b[ri] = v: the ELL solver's own b, or the host-side b of the sparse-matrix path."""
+        if ti.static(self.ppe_ell):
+            A.b[ri] = ti.cast(v, A.b.dtype)
+        else:
+            self.b[ri] = ti.cast(v, self.b.dtype)
 
     @ti.func
     def _dirichlet_value(self, i):
@@ -517,16 +527,16 @@ class ISPHSolver(SolverCommon):
         return val
 
     @ti.kernel
-    def _k_scatter_pressure(self):
+    def _k_scatter_pressure(self, psol: ti.template()):
         for i in range(self.n):
             if self.kind[i] == WATER:
-                self.p[i] = self.psol[self.row[i]]
+                self.p[i] = psol[self.row[i]]
 
     @ti.kernel
-    def _k_gather_pressure(self):
+    def _k_gather_pressure(self, psol: ti.template()):
         for i in range(self.n):
             if self.kind[i] == WATER:
-                self.psol[self.row[i]] = ti.cast(self.p[i], self.psol.dtype)
+                psol[self.row[i]] = ti.cast(self.p[i], psol.dtype)
 
     @ti.kernel
     def _k_wall_pressure(self):
@@ -697,6 +707,24 @@ class ISPHSolver(SolverCommon):
         return ti.Vector([ke, vmax, vol, bad, first_bad, nfree])
 
     # ------------------------------------------------------------------ step
+    def _widen_ppe(self, exc: EllOverflowError, dt: float) -> None:
+        """A PPE row needed more slots than the ELL matrix has (the water crowded: compression, impact):
+        continue with a matrix 1.25 x wider than that row needs (its kernels compile once), the warm start
+        kept, and say so. Past the neighbour-list capacity no row can grow, so that stays an error."""
+        width = min(int(math.ceil(1.25 * exc.needed)), self.max_nb)
+        if width < exc.needed:
+            raise InstabilityError(
+                f"step {self.step_count + 1}, t = {self.time + dt:.6g} s: a PPE row has {exc.needed} "
+                f"off-diagonal entries, beyond the neighbour-list capacity {self.max_nb}",
+                step=self.step_count + 1, time=self.time + dt, quantity="PPE row width", family="solver")
+        log.warning("step %d, t = %.6g s: a PPE row has %d off-diagonal entries, the ELL matrix held %d; "
+                    "widened to %d (set isph.ppe.width to start there)", self.step_count + 1, self.time + dt,
+                    exc.needed, exc.capacity, width)
+        self.ppe = self.ppe.with_width(width)
+        self.b = self.ppe.b
+        self.psol = self.ppe.x
+        self.ppe_widenings += 1
+
     def neighbour_search(self):
         self._sort_and_reorder()
         self._k_rows()
@@ -725,22 +753,20 @@ class ISPHSolver(SolverCommon):
         self._k_predictor()
         t0 = self._tick("predictor", t0)
         if self.ppe_ell:
-            self._k_gather_pressure()  # warm start: the solver's x is the last pressure in this step's rows
-            self._k_assemble_ell()
+            self._k_gather_pressure(self.psol)  # warm start: the solver's x is the last pressure in this step's rows
+            self._k_assemble_ell(self.ppe)
             t0 = self._tick("ppe_assembly", t0)
             try:
                 iters, res, ok = self.ppe.solve(self.n_water, zero_mean=self.dirichlet_rows[None] == 0)
             except EllOverflowError as exc:
-                raise InstabilityError(
-                    f"step {self.step_count + 1}, t = {self.time + dt:.6g} s: a PPE row has {exc.needed} "
-                    f"off-diagonal entries but the ELL matrix holds {exc.capacity}; raise the config key "
-                    f"`isph.ppe.width` to at least {exc.needed}", step=self.step_count + 1,
-                    time=self.time + dt, quantity="PPE row width", family="solver") from None
+                self._widen_ppe(exc, dt)
+                self._k_assemble_ell(self.ppe)
+                iters, res, ok = self.ppe.solve(self.n_water, zero_mean=self.dirichlet_rows[None] == 0)
         else:
             self._k_assemble(self.ppe.builder)
             self.ppe.check_triplets(int(self.triplets[None]))
             self.ppe.build()
-            self._k_gather_pressure()
+            self._k_gather_pressure(self.psol)
             b = self.b.to_numpy()[: self.n_water]
             x0 = self.psol.to_numpy()[: self.n_water]
             t0 = self._tick("ppe_assembly", t0)
@@ -751,7 +777,7 @@ class ISPHSolver(SolverCommon):
                                  self.cfg.isph.ppe.on_failure)
         if not self.ppe_ell:
             self.psol.from_numpy(sol.astype(self.np_fp))
-        self._k_scatter_pressure()
+        self._k_scatter_pressure(self.psol)
         self._k_wall_pressure()
         self._k_corrector()
         collisions = 0
