@@ -62,6 +62,10 @@ class WaterBlock(Box):
     #: height, rho_w |g| (start_head - height) (m), instead of the weight of the fluid above them (a
     #: plenum under a baffle or a permeable base, fed from a reservoir at that level); default none
     start_head: float | None = None
+    #: mode wcsph_biot: keep only the block's lattice points inside soil blocks, so that the block
+    #: fills the pores of the ground up to its top (a levee saturated up to a phreatic level) and
+    #: leaves the open ground above and beside the soil dry; needs `soil_blocks`
+    inside_soil: bool = False
 
 
 class SoilRegion(Strict):
@@ -853,6 +857,8 @@ def _check_mode_sections(cfg: Config) -> None:
         for k, block in enumerate(cfg.water):
             if block.start_head is not None:
                 _fail(f"water[{k}].start_head", f"applies to mode wcsph_biot only (mode is {cfg.mode})")
+            if block.inside_soil:
+                _fail(f"water[{k}].inside_soil", f"applies to mode wcsph_biot only (mode is {cfg.mode})")
 
 
 def _check_soil_blocks(cfg: "Config") -> None:
@@ -869,6 +875,14 @@ def _check_soil_blocks(cfg: "Config") -> None:
             _need_len(blk.max, cfg.dim, f"{key}.max")
         lo, hi = blk.bounds(cfg.dim, cfg.tank.size)
         _inside(Box(min=lo, max=hi), cfg.tank.size, key)
+    for k, block in enumerate(cfg.water):
+        if block.inside_soil and cfg.mode == "wcsph_biot":
+            if not cfg.soil_blocks:
+                _fail(f"water[{k}].inside_soil", "needs soil_blocks (the water fills their pores)")
+            bounds = [blk.bounds(cfg.dim, cfg.tank.size) for blk in cfg.soil_blocks]
+            if not any(all(a < sh and b > sl for a, b, sl, sh in zip(block.min, block.max, slo, shi))
+                       for slo, shi in bounds):
+                _fail(f"water[{k}].inside_soil", "the block overlaps no soil block (no pore to fill)")
     for k, src in enumerate(cfg.inflow):
         if cfg.mode != "wcsph_biot":
             _fail(f"inflow[{k}]", f"an inflow needs mode wcsph_biot (mode is {cfg.mode})")

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene import AIR, SOIL, WALL, WATER
+from ..scene import AIR, SOIL, WALL, WATER, soil_block_index
 from . import eos
 from .soil import geostatic_stress
 from .stage import apply_stage, load_stage
@@ -54,6 +54,8 @@ def head_pressure(cfg, position: np.ndarray, kind: np.ndarray, p: np.ndarray, rh
     for blk in cfg.water:
         lo, hi = np.asarray(blk.min, float), np.asarray(blk.max, float)
         inside = np.all((position >= lo - 1e-9) & (position <= hi + 1e-9), axis=1) & ~taken
+        if getattr(blk, "inside_soil", False):  # that block filled only the soil's pores
+            inside &= soil_block_index(cfg, position) >= 0
         if blk.start_head is not None:
             p[inside] = rho0[inside] * g_down * (blk.start_head - position[inside, -1])
         taken |= inside
