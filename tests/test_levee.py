@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from taichi_sph.io.hdf5 import RunFile
-from taichi_sph.wcsph.dupuit import discharge_ratio
+from taichi_sph.wcsph.dupuit import discharge_ratio, section_discharge
 
 G = 9.81
 N0, RHO_S, RHO_W = 0.4, 2650.0, 1000.0
@@ -111,21 +111,23 @@ def test_inflow_raises_the_level(run_cli, tmp_path):
     assert abs(level - 0.115) < 0.01, level
 
 
-@pytest.mark.xfail(strict=True, reason="the model's discharge is 1.2-1.4 x Dupuit's (dx 0.01: 1.23-1.38, dx 0.005: "
-                   "1.31); water above the phreatic line carries flux (docs/biot.md)")
 def test_rigid_levee_seepage_dupuit(run_cli, tmp_path):
-    """configs/levee_seepage.yaml to 1.2 s: the discharge into the downstream basin (the slope of its
-    water volume over 0.6-1.2 s, after the start-up) against Dupuit's q = k (h1^2 - h2^2) / (2 L) with the
-    heads of the same interval (quasi-steady: the reservoir falls ~3 mm/s). Bound 15 % (the acceptance
-    number). Measured: q / q_Dupuit = 1.38 at dx 0.01 (0.5-3 s; the fluxes through three sections of the
-    levee agree within 10 %, so it is steady), 1.23 over this test's 0.6-1.2 s, and 1.31 at dx 0.005: the pressure along the floor follows
-    Dupuit's head within 1 cm, but the water inside the levee stands 1-2 cm (about one smoothing length)
-    above the zero-pressure line, and that layer carries flux too."""
+    """configs/levee_seepage.yaml to 2 s (the water in the levee starts on its steady free surface): the
+    discharge into the downstream basin (the slope of its water volume over 0.3-2 s) against Dupuit's
+    q = k (h1^2 - h2^2) / (2 L) with the heads of the same interval (quasi-steady: the reservoir falls
+    ~2 mm/s), and the discharge through 13 vertical sections of the levee, which in steady seepage through
+    a rectangular dam all carry Dupuit's q (Charny). Measured at dx 0.01: basin 0.93 (0.96 over 0.3-3 s),
+    sections 0.96-1.01. Bounds: basin 15 % (the acceptance number; the basin gains only ~24 particles in
+    the window, so one particle more or less moves the slope by ~4 %), each section 10 % (the target;
+    with the frame velocities instead of displacements the sections read ~3 % higher). Before the rigid
+    skeleton stopped passing the drag's reaction back to the water, both read 1.6 (k / (1 - rho_w / rho_s))."""
     out = tmp_path / "seep.h5"
-    r = run_cli("--config", "configs/levee_seepage.yaml", "--set", "end_time=1.2", "--out", out, "--no-progress")
+    r = run_cli("--config", "configs/levee_seepage.yaml", "--set", "end_time=2.0", "--out", out, "--no-progress")
     assert r.returncode == 0, r.stderr
-    ratio = discharge_ratio(out, k=0.02, length=0.15, t_from=0.6)["ratio"]
-    assert abs(ratio - 1) < 0.15, ratio
+    m = discharge_ratio(out, k=0.02, length=0.15, t_from=0.3)
+    assert abs(m["ratio"] - 1) < 0.15, m
+    q = section_discharge(out, np.arange(0.615, 0.74, 0.01), t_from=0.3) / m["q_dupuit"]
+    assert np.abs(q - 1).max() < 0.10, q
 
 
 def _first_yield(path, growth=1e-3):

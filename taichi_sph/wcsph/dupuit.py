@@ -41,3 +41,34 @@ def discharge_ratio(path, k: float, length: float, t_from: float, reservoir=(0.1
     heads = np.array(heads)
     qd = float(heads[:, 2].mean())
     return {"ratio": q / qd, "q": q, "q_dupuit": qd, "h1": float(heads[:, 0].mean()), "h2": float(heads[:, 1].mean())}
+
+
+def section_discharge(path, sections, t_from: float, t_to: float = float("inf")) -> np.ndarray:
+    """Mean discharge (m^2/s) through vertical sections of a run file over t_from <= t <= t_to: for each
+    section x_s, the water particles within dx / 2 of it carry sum V_i (x_i(t + dt_f) - x_i(t)) / dt_f / dx,
+    from the displacement between consecutive frames (dt_f apart; particles keep their place in the frame
+    arrays) rather than the frame velocity, which inside the soil is v + dt a / 2 without the drag and
+    reads a few % high. In steady seepage through a rigid dam every section carries the same discharge."""
+    from ..io.hdf5 import RunFile
+
+    sections = np.asarray(sections, float)
+    total = np.zeros(len(sections))
+    n = 0
+    with RunFile(path) as rf:
+        dx, d = rf.dx, rf.dim
+        rho_w = float(rf.attrs.get("rho_w", 1000.0))
+        times = [rf.frame(i)["time"] for i in range(rf.n_frames)]
+        use = [i for i in range(rf.n_frames - 1) if times[i] >= t_from - 1e-9 and times[i + 1] <= t_to + 1e-9]
+        for i in use:
+            f, g = rf.frame(i), rf.frame(i + 1)
+            w = (rf.kind == WATER) & f["active"] & g["active"]
+            x = f["position"]
+            vol = dx**d * rho_w / f["density"]  # m / rho, the particle's mass being rho_w dx^d
+            disp = (g["position"][:, 0] - x[:, 0]) / (g["time"] - f["time"])
+            for k, xs in enumerate(sections):
+                s = w & (np.abs(x[:, 0] - xs) < dx / 2)
+                total[k] += (vol[s] * disp[s]).sum() / dx ** (d - 1)
+            n += 1
+    if n == 0:
+        raise ValueError(f"{path}: no pair of frames within {t_from} - {t_to} s")
+    return total / n

@@ -289,7 +289,16 @@ class SoilStep:
                     nj = 1.0 - rhoj / self.rho_g
                     wsum += wij
                     nsum += wij * nj
-                    csum += wij * nj * self.rho_w / rhoj
+                    # a held skeleton does not move: the drag's reaction on it goes into the constraint, so
+                    # the water's part (1 - n) that moves with the soil gets no share of it (C_s = 0 there)
+                    movable = True
+                    if ti.static(self.soil_fixed):
+                        movable = False
+                    if ti.static(self.block_fixed):  # noqa: SIM102 (compile-time if)
+                        if self.sfix[self.ids[j]] == 1:
+                            movable = False
+                    if movable:
+                        csum += wij * nj * self.rho_w / rhoj
                     vbar += wij * self.v[j]
                     abar += wij * self.a[j]
                 ad = ti.Vector.zero(float, self.dim)
