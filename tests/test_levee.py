@@ -3,7 +3,6 @@ the river inflow, steady seepage through a rigid levee against Dupuit, and where
 first yields."""
 
 import numpy as np
-import pytest
 
 from taichi_sph.io.hdf5 import RunFile
 from taichi_sph.wcsph.dupuit import discharge_ratio, section_discharge
