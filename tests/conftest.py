@@ -88,3 +88,19 @@ def front_errors(T, Z, name, delay=0.0, lo=1.0, hi=3.0):
     ref = reference_front(name)
     sel = (ref[:, 0] >= lo) & (ref[:, 0] <= hi)
     return ref[sel, 0], np.interp(ref[sel, 0] - delay, T, Z) / ref[sel, 1] - 1
+
+
+def check_fronts_against_martin_moyce(T, Z, early: float, late: float, shifted: float) -> None:
+    """Both Martin & Moyce series over T in [1, 3]: the simulated front leads the raw data everywhere, by
+    less than `early` for T < 1.5 and `late` after, and with the release delay taken out it is within
+    `shifted` of the data (relative errors)."""
+    import numpy as np
+
+    for name in MARTIN_MOYCE:
+        Tr, err = front_errors(T, Z, name)
+        first = Tr < 1.5
+        assert np.all(err > 0.0), (name, err)
+        assert np.all(err[first] < early), (name, err)
+        assert np.all(err[~first] < late), (name, err)
+        _, err = front_errors(T, Z, name, delay=RELEASE_DELAY_T)
+        assert np.all(np.abs(err) < shifted), (name, err)
