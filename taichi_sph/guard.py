@@ -81,7 +81,7 @@ def time_step_error(step: int, time: float, dt: float, dt_min: float, what: str)
 class StabilityGuard:
     """Host-side checks the driver makes; built once per run from the config and the scene's kinds."""
 
-    def __init__(self, cfg, kind: np.ndarray, rho_ref: np.ndarray, speed_bound: float):
+    def __init__(self, cfg, kind: np.ndarray, rho_ref: np.ndarray, speed_bound: float, body=None, motions=()):
         g = cfg.guard
         self.every = g.every
         self.speed_bound = float(speed_bound)
@@ -94,10 +94,26 @@ class StabilityGuard:
         self.wall = self.kind == WALL
         self.wall_tol = WALL_TOLERANCE * cfg.dx
         self.wall0 = None
+        # obstacles with a prescribed motion (sph/wall_motion.py): index of each wall particle's motion
+        self.motions = list(motions)
+        self.wall_body = np.asarray(body)[self.wall] if body is not None else np.full(int(self.wall.sum()), -1)
 
-    def start(self, fields: dict) -> None:
-        """Remember where the walls are at t = 0."""
-        self.wall0 = np.array(fields["position"][self.wall], dtype=float)
+    def _wall_displacement(self, time: float) -> np.ndarray:
+        """Where the motions have moved each wall particle by `time` (zero for fixed walls)."""
+        from .sph.wall_motion import displacement
+
+        out = np.zeros((len(self.wall_body), self.kind_dim))
+        for b, m in enumerate(self.motions):
+            out[self.wall_body == b] = displacement(m, time)
+        return out
+
+    def start(self, fields: dict, time: float = 0.0) -> None:
+        """Remember where the walls were at t = 0 (a resumed run: where they are less their motion)."""
+        pos = np.asarray(fields["position"], dtype=float)
+        self.kind_dim = pos.shape[1]
+        self.wall0 = np.array(pos[self.wall], dtype=float)
+        if self.motions:
+            self.wall0 -= self._wall_displacement(time)
 
     def due(self, step: int) -> bool:
         return step % self.every == 0
@@ -139,11 +155,13 @@ class StabilityGuard:
                     f"(guard.{name}) at {len(ids)} particle(s) (particle ids {ids_text(ids)})", step=step,
                     time=time, quantity="density ratio", particles=ids, family="bounds")
         if self.wall0 is not None and len(self.wall0):
-            moved = np.abs(np.asarray(fields["position"])[self.wall] - self.wall0).max(axis=1) > self.wall_tol
+            expected = self.wall0 + self._wall_displacement(time) if self.motions else self.wall0
+            moved = np.abs(np.asarray(fields["position"])[self.wall] - expected).max(axis=1) > self.wall_tol
             if moved.any():
                 ids = np.flatnonzero(self.wall)[moved]
                 raise InstabilityError(
-                    f"{where(step, time)}: {len(ids)} wall particle(s) moved (particle ids {ids_text(ids)})",
+                    f"{where(step, time)}: {len(ids)} wall particle(s) moved (particle ids {ids_text(ids)})"
+                    + (" off their prescribed motion" if self.motions else ""),
                     step=step, time=time, quantity="wall position", particles=ids, family="domain")
 
 

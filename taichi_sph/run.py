@@ -142,7 +142,8 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     step_wall = 0.0
     volume0 = 0.0
     try:
-        guard = StabilityGuard(cfg, scene.kind, _reference_density(solver, scene.kind), solver.max_speed_bound())
+        guard = StabilityGuard(cfg, scene.kind, _reference_density(solver, scene.kind), solver.max_speed_bound(),
+                               scene.body, scene.motions)
         every = cfg.output.every
         if saved is None:
             first = solver.initial_diagnostics()
@@ -155,7 +156,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             t = 0.0
             last = first
         else:
-            guard.start(_with_flag(solver.fields_by_id()))  # walls have not moved since t = 0
+            guard.start(_with_flag(solver.fields_by_id()), solver.time)  # walls where their motion put them
             extras.resume(saved)
             volume0, next_out, t, last = saved["volume0"], saved["next_out"], saved["t"], saved["last"]
             checkpoints.next = saved["next_checkpoint"]

@@ -9,6 +9,7 @@ a unit normal pointing into the fluid (used by slip walls and the wall pressure 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,6 +34,10 @@ class Scene:
     velocity: np.ndarray | None = None  # (N, dim) initial velocity; None: all at rest
     period: tuple = ()  # period L per axis, 0.0 where not periodic (empty: no periodic axis)
     inflow_rows: list = field(default_factory=list)  # per inflow source, its rows of reserve ids (wcsph/inflow.py)
+    #: per particle, the index into `motions` of the moving obstacle it belongs to, -1 for all else
+    body: np.ndarray | None = None
+    #: prescribed motion of each moving obstacle: (velocity (dim,), start, stop or inf)
+    motions: list = field(default_factory=list)
 
     @property
     def n(self) -> int:
@@ -299,10 +304,23 @@ def build_scene(cfg) -> Scene:
         water_v = np.concatenate([water_v, block_velocity(box, pts[keep], size)])
 
     wall, wall_n = tank_walls(size, dx, layers, cfg.tank.open_top, tuple(cfg.tank.periodic))
+    wall_body = np.full(len(wall), -1, np.int32)
+    motions = []
+    sweep_lo, sweep_hi = np.zeros(dim), size.copy()  # what moving obstacles sweep until end_time
     for box in cfg.obstacles:
         pts, nrm = obstacle_particles(box.min, box.max, dx)
+        body = -1
+        if box.motion is not None:
+            body = len(motions)
+            m = box.motion
+            stop = math.inf if m.stop is None else float(m.stop)
+            motions.append((np.asarray(m.velocity, float), float(m.start), stop))
+            moved = np.asarray(m.velocity, float) * max(0.0, min(stop, cfg.end_time) - m.start)
+            sweep_lo = np.minimum(sweep_lo, np.asarray(box.min, float) + np.minimum(moved, 0.0))
+            sweep_hi = np.maximum(sweep_hi, np.asarray(box.max, float) + np.maximum(moved, 0.0))
         wall = np.concatenate([wall, pts])
         wall_n = np.concatenate([wall_n, nrm])
+        wall_body = np.concatenate([wall_body, np.full(len(pts), body, np.int32)])
     keep = remove_overlaps(water, wall, 0.5 * dx)
     water, water_v = water[keep], water_v[keep]
     air = np.zeros((0, dim))
@@ -334,15 +352,23 @@ def build_scene(cfg) -> Scene:
     lo = -(layers + 1) * dx * np.ones(dim)
     hi = size + (layers + 1) * dx
     hi[-1] = size[-1] + max(0.5 * size[-1], 4 * r_e)
+    # moving obstacles stay inside the neighbour grid over the whole run
+    lo = np.minimum(lo, sweep_lo - (layers + 1) * dx)
+    hi = np.maximum(hi, sweep_hi + (layers + 1) * dx)
     period = tuple(float(size[ax]) if ax in cfg.tank.periodic else 0.0 for ax in range(dim))
     for ax in cfg.tank.periodic:
         lo[ax], hi[ax] = 0.0, size[ax]
+    body = None
+    if motions:
+        body = np.full(len(position), -1, np.int32)
+        body[len(water): len(water) + len(wall)] = wall_body  # walls follow the water in `position`
     velocity = None
     if np.any(water_v != 0.0):
         velocity = np.zeros_like(position)
         velocity[: len(water_v)] = water_v
     return Scene(dim=dim, dx=dx, position=position, kind=kind, normal=normal, lo=lo, hi=hi, tank_size=size,
-                 markers=build_markers(cfg), velocity=velocity, period=period, inflow_rows=inflow_rows)
+                 markers=build_markers(cfg), velocity=velocity, period=period, inflow_rows=inflow_rows,
+                 body=body, motions=motions)
 
 
 def taylor_green_velocity(pts: np.ndarray, size, scale: float) -> np.ndarray:

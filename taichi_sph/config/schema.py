@@ -206,8 +206,24 @@ class Tank(Strict):
     periodic: list[int] = []
 
 
+class ObstacleMotion(Strict):
+    """Prescribed motion of an obstacle: a rigid translation at constant velocity between `start` and
+    `stop` (a gate lifted to release a water column, a piston). The obstacle's wall particles carry
+    this velocity in the wall conditions of both modes (slip and no-slip are taken relative to it)."""
+
+    #: velocity (m/s), dim components
+    velocity: list[float]
+    #: time the motion starts (s)
+    start: NonNegFloat = 0.0
+    #: time the motion stops (s); default: never (it runs to end_time)
+    stop: Optional[PosFloat] = None
+
+
 class Obstacle(Box):
     """A solid block of wall particles inside the tank (m)."""
+
+    #: prescribed motion; default: fixed
+    motion: Optional[ObstacleMotion] = None
 
 
 class PPESolver(Strict):
@@ -662,6 +678,7 @@ def check(cfg: "Config") -> None:
             _need_len(box.min, d, f"{group}[{k}].min")
             _need_len(box.max, d, f"{group}[{k}].max")
             _inside(box, cfg.tank.size, f"{group}[{k}]")
+    _check_motions(cfg)
     for k, reg in enumerate(cfg.soil.regions):
         key = f"soil.regions[{k}]"
         if reg.shape == "box":
@@ -694,6 +711,22 @@ def check(cfg: "Config") -> None:
         _fail("dt", f"must be smaller than end_time = {cfg.end_time}")
     if cfg.timestep.min > cfg.timestep.max:
         _fail("timestep.min", "must not exceed timestep.max")
+
+
+def _check_motions(cfg: "Config") -> None:
+    """Moving obstacles: a velocity per axis, stop after start, and no motion along a periodic axis
+    (their wall particles are never wrapped)."""
+    for k, box in enumerate(cfg.obstacles):
+        m = box.motion
+        if m is None:
+            continue
+        key = f"obstacles[{k}].motion"
+        _need_len(m.velocity, cfg.dim, f"{key}.velocity")
+        if m.stop is not None and m.stop <= m.start:
+            _fail(f"{key}.stop", f"must be later than start = {m.start}")
+        for ax in cfg.tank.periodic:
+            if 0 <= ax < cfg.dim and m.velocity[ax] != 0.0:
+                _fail(f"{key}.velocity", f"must be 0 along periodic axis {ax}")
 
 
 def _fail(key: str, message: str):

@@ -32,6 +32,7 @@ from ..scene import WALL, WATER
 from ..sph import kernels, operators
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
 from ..sph.solver_common import SolverCommon
+from ..sph.wall_motion import WallMotion
 from . import porosity as _porosity
 
 log = logging.getLogger("taichi_sph")
@@ -141,6 +142,12 @@ class ISPHSolver(SolverCommon):
         if scene.velocity is not None:
             self.v.from_numpy(scene.velocity.astype(self.np_fp))
         self.p.fill(0.0)
+        # obstacles with a prescribed motion (sph/wall_motion.py): their wall velocity enters the wall
+        # conditions through self.v of the wall particles
+        self.motion = WallMotion(scene, dim, self.period, self.np_fp)
+        self.wall_body = self.motion.body
+        self.wall_origin = self.motion.origin
+        self.particle_fields += self.motion.fields()
 
         self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.re, self.max_nb, period=self.period)
         self.markers = None
@@ -353,7 +360,7 @@ class ISPHSolver(SolverCommon):
                     vj = self.v[j]
                     vol = self.mass / self.rho_w
                     if self.kind[j] == WALL:
-                        vj = operators.mirror_velocity(vi, self.normal[j], self.no_slip)
+                        vj = operators.mirror_velocity(vi, self.v[j], self.normal[j], self.no_slip)
                     else:
                         vol = self.mass / (self.eps[j] * self.rho_w)
                     if r > 0.0:
@@ -396,7 +403,7 @@ class ISPHSolver(SolverCommon):
                         nu_j = nu_i
                         m_j = eps_i * self.mass
                         if self.kind[j] == WALL:
-                            vj = operators.mirror_velocity(vi, self.normal[j], self.no_slip)
+                            vj = operators.mirror_velocity(vi, self.v[j], self.normal[j], self.no_slip)
                         else:
                             m_j = self.mass
                             rb_j = self.eps[j] * self.rho_w
@@ -479,7 +486,7 @@ class ISPHSolver(SolverCommon):
                             gw = kernels.grad_w(rij, r, self.h, self.dim)
                             f = operators.laplacian_weight(r, self.h, self.eta2, self.dim)
                             if self.kind[j] == WALL:
-                                vj = operators.mirror_velocity(vi, self.normal[j], self.no_slip)
+                                vj = operators.mirror_velocity(vi, self.v[j], self.normal[j], self.no_slip)
                                 m_w = eps_i * self.mass
                                 div += m_w * (vj - vi).dot(gw)
                             else:
@@ -611,7 +618,7 @@ class ISPHSolver(SolverCommon):
         """Near-contact collisions. Water pairs closer than r_coll that approach lose (1 + e)/2 of their
         relative normal velocity (equal masses). At walls the kinematic condition v . n >= 0 is enforced
         on particles closer to the wall surface than r_coll / 2 (a particle at rest sits dx / 2 from it):
-        the velocity into the wall is reversed with restitution e. The wall surface lies dx / 2 beyond
+        the velocity into the wall (relative to it, when it moves) is reversed with restitution e. The wall surface lies dx / 2 beyond
         the first wall layer along the wall particle's normal."""
         self.collisions[None] = 0
         for i in range(self.n):
@@ -621,6 +628,7 @@ class ISPHSolver(SolverCommon):
                 dv = ti.Vector.zero(float, self.dim)
                 d_wall = 1.0e30
                 n_wall = ti.Vector.zero(float, self.dim)
+                v_wall = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     rij = operators.rel(self.x[j], xi, self.period)
@@ -630,6 +638,7 @@ class ISPHSolver(SolverCommon):
                         if d < d_wall:
                             d_wall = d
                             n_wall = self.normal[j]
+                            v_wall = self.v[j]
                     elif r < self.r_coll and r > 0.0:
                         e = rij / r
                         vrel = (vi - self.v[j]).dot(e)
@@ -638,7 +647,7 @@ class ISPHSolver(SolverCommon):
                             ti.atomic_add(self.collisions[None], 1)
                 vnew = vi + dv
                 if d_wall < 0.5 * self.r_coll:
-                    vn = vnew.dot(n_wall)
+                    vn = (vnew - v_wall).dot(n_wall)
                     if vn < 0.0:
                         vnew -= (1.0 + self.restitution) * vn * n_wall
                         ti.atomic_add(self.collisions[None], 1)
@@ -740,6 +749,9 @@ class ISPHSolver(SolverCommon):
 
     def step(self, dt: float) -> dict:
         t0 = _time.perf_counter()
+        if self.motion.any:
+            self.motion.set_step(self.time, self.time + dt)
+            self.motion.assign(self.v, self.n)
         self.neighbour_search()
         t0 = self._tick("neighbours", t0)
         self.update_porosity()
@@ -785,6 +797,8 @@ class ISPHSolver(SolverCommon):
             self._k_collision()
             collisions = int(self.collisions[None])
         self._k_advect()
+        if self.motion.any:
+            self.motion.advance(self.x, self.n)
         t0 = self._tick("corrector", t0)
         self.step_count += 1
         self.time += dt
@@ -841,7 +855,8 @@ class ISPHSolver(SolverCommon):
     # ------------------------------------------------------------------ checkpoints
     #: fields that carry over from one step to the next (all else is recomputed by each step); the
     #: pressure is the PPE's warm start. Per-particle state added later belongs in this tuple.
-    state_fields = ("x", "v", "normal", "p", "eps", "kind", "ids", "active", "rho_n", "d50", "rest_fill")
+    state_fields = ("x", "v", "normal", "p", "eps", "kind", "ids", "active", "rho_n", "d50", "rest_fill",
+                    "wall_body", "wall_origin")
     state_scalars = ("step_count", "time", "removed_total")
 
     def state(self) -> dict:

@@ -25,13 +25,15 @@ def variable_laplacian_pair(m_j, rb_i, q_i, rb_j, q_j, f_ij):
 
 
 @ti.func
-def mirror_velocity(v_i, n_w, no_slip: ti.template()):
-    """Velocity a wall particle takes as seen from fluid particle i (virtual-marker idea of the seed,
-    evaluated at i itself): no-slip reverses the whole velocity, slip only its normal component."""
-    out = -v_i
+def mirror_velocity(v_i, v_w, n_w, no_slip: ti.template()):
+    """Velocity a wall particle (moving at v_w, zero for fixed walls) takes as seen from fluid particle i
+    (virtual-marker idea of the seed, evaluated at i itself): relative to the wall, no-slip reverses the
+    whole velocity, slip only its normal component."""
+    u = v_i - v_w
+    out = -u
     if ti.static(not no_slip):
-        out = v_i - 2.0 * v_i.dot(n_w) * n_w
-    return out
+        out = u - 2.0 * u.dot(n_w) * n_w
+    return v_w + out
 
 
 @ti.func

@@ -133,7 +133,7 @@ class SoilStep:
                         db = self.wdepth[j]
                         nrm = self.normal[j]
                         beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
-                        vij = terms.boundary_relative_velocity(vi, nrm, beta, self.no_slip)
+                        vij = terms.boundary_relative_velocity(vi - self.v[j], nrm, beta, self.no_slip)
                         L -= self.vol0 * vij.outer_product(gw)
                 rho = rhoi * (1.0 - L.trace() * dt)
                 sig, dgam, _e = soil.stress_update(self.sig[i], L, dt, self.e0, self.p_ref, self.m_exp, self.p_floor,
@@ -214,7 +214,7 @@ class SoilStep:
                             sw_r = refl @ si_r @ refl
                         acc -= mw * (si_r + sw_r + dsig / (rhoi * rhoi) * ti.Matrix.identity(float, self.dim)) @ gw
                         beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
-                        vij = terms.boundary_relative_velocity(vi, nrm, beta, self.no_slip)
+                        vij = terms.boundary_relative_velocity(vi - self.v[j], nrm, beta, self.no_slip)
                         pij = terms.artificial_viscosity(vij, rij, r2, h, ci, rhoi, self.alpha_s, 0.0, self.av_eps)
                         acc -= mw * pij * gw
                         if ti.static(self.coupled):

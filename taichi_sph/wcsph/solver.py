@@ -40,6 +40,7 @@ from ..scene import AIR, SOIL, WALL, WATER
 from ..sph import kernels, operators
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
 from ..sph.solver_common import SolverCommon
+from ..sph.wall_motion import WallMotion
 from . import eos, terms
 from .inflow import Inflow, activate
 from .initial import initial_state
@@ -198,6 +199,13 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.h.fill(self.h0)
         self.a.fill(0.0)
         self.xs.fill(0.0)
+        # obstacles with a prescribed motion (sph/wall_motion.py), moved by the kick-drift; their wall
+        # particles' v is the wall velocity of eq 50-51
+        self.motion = WallMotion(scene, dim, self.period, f)
+        self.wall_body = self.motion.body
+        self.wall_origin = self.motion.origin
+        self.moving = self.motion.any
+        self.particle_fields += self.motion.fields()
         self.initial_density = init["density"]
         if self.has_soil:
             self.sig.from_numpy(init["stress"].astype(f))
@@ -339,6 +347,17 @@ class WCSPHSolver(SoilStep, SolverCommon):
                     hi = self.q[i][self.Q_H]
                     self.s[i][self.S_H] = hi
                     ti.atomic_max(hmax, hi)
+            if ti.static(self.moving):  # noqa: SIM102 (compile-time if)
+                if self.wall_body[i] >= 0:  # a moving obstacle's wall particle: its velocity over this step
+                    vb = self.motion.vel[self.wall_body[i]]
+                    self.v[i] = vb
+                    xn = self.motion.position(i)
+                    self.x[i] = xn
+                    for d in ti.static(range(self.dim)):
+                        self.s[i][d] = xn[d]
+                        self.s[i][self.S_V + d] = vb[d]
+                    dd = operators.rel(xn, self.x0[i], self.period)
+                    ti.atomic_max(d2max, dd.dot(dd))
         self.red_kick[None] = ti.Vector([d2max, hmax])
 
     @ti.kernel
@@ -387,7 +406,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
                         db = self.wdepth[j]
                         nrm = self.normal[j]
                         beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
-                        vij = terms.boundary_relative_velocity(vi, nrm, beta, self.no_slip)
+                        vij = terms.boundary_relative_velocity(vi - self._vel(sj), nrm, beta, self.no_slip)
                         div -= self.vol0 * vij.dot(gw)
                     else:
                         vij = vi - self._vel(sj)
@@ -513,7 +532,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
                         db = self.wdepth[j]
                         nrm = self.normal[j]
                         beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
-                        vij = terms.boundary_relative_velocity(vi, nrm, beta, self.no_slip)
+                        vij = terms.boundary_relative_velocity(vi - self._vel(sj), nrm, beta, self.no_slip)
                         mj = rhoi * self.vol0
                         pw = operators.wall_pressure(pi, rhoi, self.g, xi - rij, xi)
                         acc += terms.pressure_same_material(mj, pri, pw / (rhoi * rhoi), gw)
@@ -592,6 +611,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
 
     def step(self, dt: float) -> dict:
         t0 = _time.perf_counter()
+        if self.moving:
+            self.motion.set_step(self.time, self.time + dt)
         self._k_kick_drift(dt, self.dt_prev)
         d2max, hmax = self.red_kick[None].to_numpy()
         if self.variable_h:
@@ -682,7 +703,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
     #: effective stress, plastic strain, pore pressure, water presence and drag (soil_step.py; one-element
     #: fields in a scene without soil).
     state_fields = ("x", "v", "a", "xs", "normal", "x0", "rho", "p", "h", "m", "wdepth", "kind", "ids", "active",
-                    "fmask", "s", "q", "sig", "eps_p", "pore", "phi_w", "adrag")
+                    "fmask", "s", "q", "sig", "eps_p", "pore", "phi_w", "adrag", "wall_body",
+                    "wall_origin")
     state_scalars = ("step_count", "time", "removed_total", "dt_prev", "r_list", "hmax", "rebuilds", "red",
                      "red_s")
 

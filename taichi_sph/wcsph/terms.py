@@ -50,8 +50,9 @@ def boundary_beta(d_b, d_a, beta_max):
 
 @ti.func
 def boundary_relative_velocity(v_a, n_w, beta, no_slip: ti.template()):
-    """v_a - v_B of eq 50 for a wall at rest: beta v_a (no-slip, Morris/Takeda), or beta (v_a . n) n
-    for a slip wall (no tangential shear; the normal component as for no-slip)."""
+    """v_a - v_B of eq 50, v_a the fluid velocity relative to the wall (v_a - v_w for a moving wall,
+    sph/wall_motion.py): beta v_a (no-slip, Morris/Takeda), or beta (v_a . n) n for a slip wall (no
+    tangential shear; the normal component as for no-slip)."""
     out = beta * v_a
     if ti.static(not no_slip):
         out = beta * v_a.dot(n_w) * n_w

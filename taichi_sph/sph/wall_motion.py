@@ -1,0 +1,97 @@
+"""Obstacles with a prescribed motion (`obstacles[k].motion`), shared by both solver modes: each moving
+obstacle is a rigid body of wall particles translated at its configured velocity between its start
+and stop times. A wall particle's velocity field holds that velocity (zero for fixed walls), and the
+wall conditions of both modes take the fluid velocity relative to it:
+
+- mode isph, virtual marker (seed 000): a wall seen from fluid particle i moves with
+  v_w + M (v_i - v_w), M = -1 (no-slip) or the reflection of the normal component (slip);
+- mode wcsph_biot, Morris/Takeda (seed 002 eq 50-51): the relative velocity v_i - v_B of a boundary
+  particle is beta (v_i - v_w) (no-slip), or its normal component (slip).
+
+The wall pressure keeps its hydrostatic Neumann form: the motion is at constant velocity, so the
+wall's acceleration (the rho a_w . n term of the Neumann condition) is zero except at the start and
+stop instants. A gate lifted along its own face has no normal velocity at all.
+"""
+
+import numpy as np
+import taichi as ti
+
+from . import operators
+
+
+def step_velocity(motion, t0: float, t1: float) -> np.ndarray:
+    """Mean velocity of one motion (velocity, start, stop) over the step [t0, t1]: its velocity times
+    the fraction of the step inside [start, stop], so that summing steps moves the body exactly
+    velocity * (stop - start)."""
+    vel, start, stop = motion
+    inside = max(0.0, min(t1, stop) - max(t0, start))
+    return vel * (inside / (t1 - t0)) if t1 > t0 else np.zeros_like(vel)
+
+
+def displacement(motion, t: float) -> np.ndarray:
+    """Displacement of a moving obstacle at time t from its configured place."""
+    vel, start, stop = motion
+    return vel * max(0.0, min(t, stop) - start)
+
+
+@ti.data_oriented
+class WallMotion:
+    """Per-particle body index (-1: not moving) and configured place (`origin`), and per body its
+    velocity over the current step and its displacement at the step's end. Positions are set from the
+    origin and the exact displacement, never summed step by step, so a body is where its motion says
+    to rounding. The solver lists `body` and `origin` among its particle fields (reordered with them)
+    and its checkpoint fields."""
+
+    def __init__(self, scene, dim: int, period, np_fp):
+        self.np_fp = np_fp
+        self.motions = list(scene.motions)
+        self.dim = dim
+        self.period = period
+        self.periodic = any(v > 0.0 for v in period)
+        n = scene.n
+        self.body = ti.field(ti.i32, n)
+        self.body.from_numpy(scene.body if scene.body is not None else np.full(n, -1, np.int32))
+        self.origin = ti.Vector.field(dim, float, n if self.motions else 1)
+        if self.motions:
+            self.origin.from_numpy(scene.position.astype(np_fp))
+        nb = max(len(self.motions), 1)
+        self.vel = ti.Vector.field(dim, float, nb)
+        self.disp = ti.Vector.field(dim, float, nb)
+
+    @property
+    def any(self) -> bool:
+        return bool(self.motions)
+
+    def fields(self) -> list:
+        """Per-particle fields to reorder with the solver's (none when nothing moves)."""
+        return [self.body, self.origin] if self.motions else []
+
+    def set_step(self, t0: float, t1: float) -> None:
+        """Velocity of every body over the step [t0, t1] and its displacement at t1."""
+        if self.motions:
+            self.vel.from_numpy(np.stack([step_velocity(m, t0, t1) for m in self.motions]).astype(self.np_fp))
+            self.disp.from_numpy(np.stack([displacement(m, t1) for m in self.motions]).astype(self.np_fp))
+
+    @ti.func
+    def position(self, i):
+        """Place of moving-body particle i at the end of the step."""
+        xn = self.origin[i] + self.disp[self.body[i]]
+        if ti.static(self.periodic):
+            xn = operators.wrap(xn, self.period)
+        return xn
+
+    @ti.kernel
+    def assign(self, v: ti.template(), n: ti.i32):
+        """v = v_body for the particles of moving bodies (fixed walls keep v = 0): the wall velocity the
+        fluid sees during the step."""
+        for i in range(n):
+            b = self.body[i]
+            if b >= 0:
+                v[i] = self.vel[b]
+
+    @ti.kernel
+    def advance(self, x: ti.template(), n: ti.i32):
+        """Moving-body particles to their place at the end of the step."""
+        for i in range(n):
+            if self.body[i] >= 0:
+                x[i] = self.position(i)
