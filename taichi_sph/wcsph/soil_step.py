@@ -177,6 +177,9 @@ class SoilStep:
                 pore_i = self.pore[i]
                 acc = self.g
                 gradp = ti.Vector.zero(float, self.dim)
+                # wall share of the pore-pressure gradient that depends on the gradient itself (below)
+                m_wall = ti.Matrix.zero(float, self.dim, self.dim)
+                hyd_t = ti.Vector.zero(float, self.dim)  # the same terms with the hydrostatic gradient
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
@@ -218,11 +221,26 @@ class SoilStep:
                         pij = terms.artificial_viscosity(vij, rij, r2, h, ci, rhoi, self.alpha_s, 0.0, self.av_eps)
                         acc -= mw * pij * gw
                         if ti.static(self.coupled):
-                            gradp += self.phi_w[i] * self.vol0 * self.rho_w * self.g.dot(xw - xi) * gw
+                            # pore pressure at the wall particle: hydrostatic across the wall (no flow
+                            # through it), the gradient at i along it (the mirror image of the excess
+                            # pressure): p_w - p_i = rho_w g . dx_n + G_i . dx_t
+                            dxw = xw - xi
+                            dxn = dxw.dot(nrm) * nrm
+                            wgt = self.phi_w[i] * self.vol0
+                            gradp += wgt * self.rho_w * self.g.dot(dxn) * gw
+                            m_wall += wgt * gw.outer_product(dxw - dxn)
+                            hyd_t += wgt * self.rho_w * self.g.dot(dxw - dxn) * gw
                     elif kj == WATER:  # noqa: SIM102 (compile-time if)
                         if ti.static(self.coupled):
                             gradp += sj[self.S_M] / self.rho[j] * (self.p[j] - pore_i) * gw
                 if ti.static(self.coupled):
+                    # G_i = gradp + m_wall G_i, solved locally; where I - m_wall is near singular the
+                    # wall is extrapolated hydrostatically along its face too
+                    a_mat = ti.Matrix.identity(float, self.dim) - m_wall
+                    if ti.abs(a_mat.determinant()) > 0.25:
+                        gradp = a_mat.inverse() @ gradp
+                    else:
+                        gradp += hyd_t
                     acc -= gradp / self.rho_g
                 acc -= self.damping * vi
                 if ti.static(self.soil_fixed):
