@@ -531,18 +531,17 @@ DIAGNOSES = {
                 "0.27 in T fits both Martin & Moyce series within 4 % at a/40), so the error against the raw data "
                 "does not go to zero with dx. The two modes agree within 0.8 % at a/40 (docs/isph.md, "
                 "\"Dam-break front\").",
-    "terzaghi": "the run decays a little slower than c_v says, first order in dx (fitted order ~1 in the small "
-                "setting): the drained face is a kernel-wide zone where the drag fades (about one smoothing length "
+    "terzaghi": "the run decays a little slower than c_v says (fitted order 0.5-1 in the small setting): the "
+                "drained face is a kernel-wide zone where the drag fades (about one smoothing length "
                 "more drainage path); the small setting's tank is 2-4 particles wide, where the side walls weigh "
                 "most (walls now mirror the pressure along their faces, which took the 4-column error from 0.080 "
                 "to 0.056 at dx 5 mm; docs/biot.md, Terzaghi consolidation).",
     "critical_gradient": "the skeleton feels 2-4 % less seepage force than i gamma_w, growing as dx falls; not the "
                          "side walls (mirroring every wall term left it unchanged) and not yet identified "
                          "(docs/biot.md, Critical gradient).",
-    "dupuit": "the discharge falls short of Dupuit's by an amount first order in dx (q / q_Dupuit 0.83, 0.87, "
-              "0.91 at dx 0.02, 0.015, 0.01 over 0.3-2 s; 0.95 at 0.005); the basin gains only ~12 particles a "
-              "second at dx 0.01, so one particle more or less moves the slope by ~4 % (docs/biot.md, Rigid "
-              "skeleton).",
+    "dupuit": "the discharge falls short of Dupuit's at coarse dx (q / q_Dupuit 0.87, 0.91, 1.00 at dx 0.02, "
+              "0.015, 0.01 over 0.3-2 s; 0.98 at 0.005); the basin gains only ~12 particles a second at dx 0.01, "
+              "so one particle more or less moves the slope by ~4 % (docs/biot.md, Rigid skeleton).",
     "darcy_column": "the slab's core velocity carries the SPH gradient of the uniform surface pressure at "
                     "the slab's two free surfaces.",
     "freefall": "the small setting runs 2-4 cm particles where the seed ran 1 cm: the 20 cm layer is then 5-10 "
