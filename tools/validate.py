@@ -520,8 +520,13 @@ def plot_case(c: Case, result: dict, img_dir: Path) -> str | None:
 
 
 DIAGNOSES = {
-    "channel_startup": "mode wcsph_biot stays near 3 % of the steady centre speed at every resolution tried (its "
-                       "centre runs ahead of the series); the source, not one of dx, is not yet identified.",
+    "channel_startup": "mode wcsph_biot's centre runs ahead of the series, 8 / 6 / 4 % at dx 4 / 2 / 1 mm, the "
+                       "column next to each wall most (15 % at 2 mm; isph 8 %), and the falling slab carries a "
+                       "uniform tension of ~-80 Pa from its hydrostatic start. Before the walls mirrored the "
+                       "pressure along their faces (docs/wcsph.md, Walls), they pushed the water beside them up "
+                       "with the hydrostatic gradient, which a falling slab does not have: 3 % at every dx, "
+                       "not converging. Artificial viscosity, XSPH, beta_max and the start density each move it "
+                       "by under 0.5 %; the source is not yet identified.",
     "hydrostatic": "mode isph is within 0.07 % at every resolution (gravity enters its PPE as a potential, so "
                    "rest is exact) and comes to rest; mode wcsph_biot's floor pressure carries the eq 27 "
                    "normalisation over the bottom rows (0.7-0.9 %, not falling with dx) and at 0.5 s still "
