@@ -121,11 +121,13 @@ def test_dambreak_front_martin_moyce(run_cli, tmp_path):
     Front = the edge of the water body on the floor (conftest.surge_front_series; Z = 1.000 at T = 0).
     Measured (docs/isph.md, "Dam-break front"), isph against Martin & Moyce series 1 / 2: +19.7 / +17.6 %
     at T = 1.2, +13.1, +12.4, +10.1, +9.1, +4.3 % for T in [1.6, 3]; with the experiments' release delay
-    (conftest.RELEASE_DELAY_T) taken out: -6.3 to +2.2 %. The two modes agree within 2.6 % over T in
-    [1, 3] (0.8 % at dx = a / 40), and both lead the experiment by the same amount: the lead is the
-    experiment's release, not either scheme. Bounds = measured + ~1.5 points: the front leads both series
-    (it may not fall behind an instantly released column's), by < 21 % for T < 1.5 and < 14.5 % after;
-    within 8 % once the release delay is taken out; modes within 3.5 % of each other.
+    (conftest.RELEASE_DELAY_T) taken out: -6.3 to +2.2 %. The two modes agree within 3.4 % over T in
+    [1, 3] (wcsph_biot / isph 1.001-1.034; 1.003-1.014 at dx = a / 40), and both lead the experiment by
+    the same amount: the lead is the experiment's release, not either scheme. Bounds = measured + ~1.5
+    points: the front leads both series (it may not fall behind an instantly released column's), by
+    < 21 % for T < 1.5 and < 14.5 % after; within 8 % once the release delay is taken out; modes within
+    4.5 % of each other (one of them losing or gaining water, as isph did before its surface test, moves
+    the front by 5-8 points).
     """
     from .conftest import check_fronts_against_martin_moyce, surge_front_series
 
@@ -146,7 +148,7 @@ def test_dambreak_front_martin_moyce(run_cli, tmp_path):
     Tw, Zw = surge_front_series(out_w, 1.0)
     t = np.linspace(1.0, 3.0, 21)
     ratio = np.interp(t, Tw, Zw) / np.interp(t, T, Z)
-    assert np.all(np.abs(ratio - 1) < 0.035), ratio
+    assert np.all(np.abs(ratio - 1) < 0.045), ratio
 
 
 @pytest.mark.parametrize("gradient", ["corrected", "difference"])

@@ -177,6 +177,14 @@ class SoilStep:
                 pore_i = self.pore[i]
                 acc = self.g
                 gradp = ti.Vector.zero(float, self.dim)
+                # wall share of the pore-pressure gradient that depends on the gradient itself (below)
+                m_wall = ti.Matrix.zero(float, self.dim, self.dim)
+                hyd_t = ti.Vector.zero(float, self.dim)  # the same terms with the hydrostatic gradient
+                # stress acceleration, and the walls' share of it through its own gradient (as for the pore
+                # pressure: the stress at a wall is the soil's across it, the gradient at i along it)
+                accs = ti.Vector.zero(float, self.dim)
+                ms_wall = ti.Matrix.zero(float, self.dim, self.dim)
+                hyds_t = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
@@ -193,18 +201,25 @@ class SoilStep:
                         vij = vi - self._vel(sj)
                         pij = terms.artificial_viscosity(vij, rij, r2, h, ci, 0.5 * (rhoi + rhoj), self.alpha_s, 0.0,
                                                          self.av_eps)
-                        acc -= mj * ((si_r + self.sig[j] / (rhoj * rhoj)) @ gw + pij * gw)
+                        accs -= mj * (si_r + self.sig[j] / (rhoj * rhoj)) @ gw
+                        acc -= mj * pij * gw
                     elif kj == WALL:
-                        # boundary particle: the soil's own stress, extrapolated by its weight (Neumann)
+                        # boundary particle: the soil's own stress, extrapolated across the wall by its
+                        # weight (Neumann) and along it by the stress gradient at i (solved below)
                         xw = xi - rij  # the wall particle's nearest image
-                        # (its equilibrium gradient: the buoyant unit weight (1 - phi_w rho_w / rho_s) rho g
-                        # where water fills the pores, whose pressure the pore term below extrapolates)
-                        dsig = rhoi * self.g.dot(xw - xi)
-                        if ti.static(self.coupled):
-                            dsig *= 1.0 - self.phi_w[i] * self.rho_w / self.rho_g
-                        mw = rhoi * self.vol0
                         db = self.wdepth[j]
                         nrm = self.normal[j]
+                        # (its equilibrium gradient: the buoyant unit weight (1 - phi_w rho_w / rho_s) rho g
+                        # where water fills the pores, whose pressure the pore term below extrapolates)
+                        g_b = self.g
+                        if ti.static(self.coupled):
+                            g_b *= 1.0 - self.phi_w[i] * self.rho_w / self.rho_g
+                        dxw = xw - xi
+                        dxn = dxw.dot(nrm) * nrm
+                        dsig = rhoi * g_b.dot(dxn)
+                        mw = rhoi * self.vol0
+                        ms_wall += self.vol0 * gw.outer_product(dxw - dxn)
+                        hyds_t -= self.vol0 * g_b.dot(dxw - dxn) * gw
                         sw_r = si_r
                         if ti.static(not self.no_slip):
                             # a slip wall carries no shear traction: the mirror image of the stress across
@@ -212,17 +227,36 @@ class SoilStep:
                             # the opposite sign (the pair sum cancels it); no-slip walls carry sigma itself
                             refl = ti.Matrix.identity(float, self.dim) - 2.0 * nrm.outer_product(nrm)
                             sw_r = refl @ si_r @ refl
-                        acc -= mw * (si_r + sw_r + dsig / (rhoi * rhoi) * ti.Matrix.identity(float, self.dim)) @ gw
+                        accs -= mw * (si_r + sw_r + dsig / (rhoi * rhoi) * ti.Matrix.identity(float, self.dim)) @ gw
                         beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
                         vij = terms.boundary_relative_velocity(vi - self.v[j], nrm, beta, self.no_slip)
                         pij = terms.artificial_viscosity(vij, rij, r2, h, ci, rhoi, self.alpha_s, 0.0, self.av_eps)
                         acc -= mw * pij * gw
                         if ti.static(self.coupled):
-                            gradp += self.phi_w[i] * self.vol0 * self.rho_w * self.g.dot(xw - xi) * gw
+                            # pore pressure at the wall particle: hydrostatic across the wall (no flow
+                            # through it), the gradient at i along it (the mirror image of the excess
+                            # pressure): p_w - p_i = rho_w g . dx_n + G_i . dx_t
+                            wgt = self.phi_w[i] * self.vol0
+                            gradp += wgt * self.rho_w * self.g.dot(dxn) * gw
+                            m_wall += wgt * gw.outer_product(dxw - dxn)
+                            hyd_t += wgt * self.rho_w * self.g.dot(dxw - dxn) * gw
                     elif kj == WATER:  # noqa: SIM102 (compile-time if)
                         if ti.static(self.coupled):
                             gradp += sj[self.S_M] / self.rho[j] * (self.p[j] - pore_i) * gw
+                s_mat = ti.Matrix.identity(float, self.dim) - ms_wall
+                if ti.abs(s_mat.determinant()) > 0.25:
+                    accs = s_mat.inverse() @ accs
+                else:
+                    accs += hyds_t
+                acc += accs
                 if ti.static(self.coupled):
+                    # G_i = gradp + m_wall G_i, solved locally; where I - m_wall is near singular the
+                    # wall is extrapolated hydrostatically along its face too
+                    a_mat = ti.Matrix.identity(float, self.dim) - m_wall
+                    if ti.abs(a_mat.determinant()) > 0.25:
+                        gradp = a_mat.inverse() @ gradp
+                    else:
+                        gradp += hyd_t
                     acc -= gradp / self.rho_g
                 acc -= self.damping * vi
                 if ti.static(self.soil_fixed):

@@ -506,6 +506,10 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 c0i = self._c0(ki)
                 cohi = self._cohesion(ki)
                 acc = self.g
+                # pressure acceleration, and the share of it the walls take through the gradient at i
+                accp = ti.Vector.zero(float, self.dim)
+                m_wall = ti.Matrix.zero(float, self.dim, self.dim)
+                hyd_t = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
@@ -534,8 +538,15 @@ class WCSPHSolver(SoilStep, SolverCommon):
                         beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
                         vij = terms.boundary_relative_velocity(vi - self._vel(sj), nrm, beta, self.no_slip)
                         mj = rhoi * self.vol0
-                        pw = operators.wall_pressure(pi, rhoi, self.g, xi - rij, xi)
-                        acc += terms.pressure_same_material(mj, pri, pw / (rhoi * rhoi), gw)
+                        # pressure at the wall particle: hydrostatic across the wall, the gradient at i
+                        # along it (mirror image of the excess pressure), p_w = p_i + rho_i g . d_n +
+                        # G_i . d_t with G_i = -rho_i a_p (solved below)
+                        dxw = -rij
+                        dxn = dxw.dot(nrm) * nrm
+                        pw = pi + rhoi * self.g.dot(dxn)
+                        accp += terms.pressure_same_material(mj, pri, pw / (rhoi * rhoi), gw)
+                        m_wall += self.vol0 * gw.outer_product(dxw - dxn)
+                        hyd_t -= self.vol0 * self.g.dot(dxw - dxn) * gw
                         acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoi, nui, f_ij) * vij
                         if ti.static(self.av_on):
                             pij = terms.artificial_viscosity(vij, rij, r2, hij, c0i, rhoi, self.av_alpha,
@@ -549,9 +560,9 @@ class WCSPHSolver(SoilStep, SolverCommon):
                         if ti.static(self.has_air):
                             same = kj == ki
                         if same:
-                            acc += terms.pressure_same_material(mj, pri, prj, gw)
+                            accp += terms.pressure_same_material(mj, pri, prj, gw)
                         else:
-                            acc += terms.pressure_interface(mi, voli, mj / rhoj, pi, prj * rhoj * rhoj, gw)
+                            accp += terms.pressure_interface(mi, voli, mj / rhoj, pi, prj * rhoj * rhoj, gw)
                         if same:
                             acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nui, f_ij) * vij
                             if ti.static(self.av_on):
@@ -563,6 +574,14 @@ class WCSPHSolver(SoilStep, SolverCommon):
                         else:
                             nuj = self._nu(ti.cast(kj, ti.i32))
                             acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nuj, f_ij) * vij
+                # a_p = A_p + m_wall a_p (the walls' tangential terms carry G_i = -rho_i a_p), solved
+                # locally; where I - m_wall is near singular, the walls are hydrostatic along their faces too
+                a_mat = ti.Matrix.identity(float, self.dim) - m_wall
+                if ti.abs(a_mat.determinant()) > 0.25:
+                    accp = a_mat.inverse() @ accp
+                else:
+                    accp += hyd_t
+                acc += accp
                 self.a[i] = acc
                 # reductions
                 vs = vi + 0.5 * dt * acc  # synchronised velocity at this time
