@@ -96,6 +96,8 @@ class StabilityGuard:
         self.wall0 = None
         # obstacles with a prescribed motion (sph/wall_motion.py): index of each wall particle's motion
         self.motions = list(motions)
+        self.periodic = [ax for ax in cfg.tank.periodic if ax < cfg.dim] if self.motions else []
+        self.tank_size = list(cfg.tank.size)
         self.wall_body = np.asarray(body)[self.wall] if body is not None else np.full(int(self.wall.sum()), -1)
 
     def _wall_displacement(self, time: float) -> np.ndarray:
@@ -156,7 +158,11 @@ class StabilityGuard:
                     time=time, quantity="density ratio", particles=ids, family="bounds")
         if self.wall0 is not None and len(self.wall0):
             expected = self.wall0 + self._wall_displacement(time) if self.motions else self.wall0
-            moved = np.abs(np.asarray(fields["position"])[self.wall] - expected).max(axis=1) > self.wall_tol
+            off = np.asarray(fields["position"])[self.wall] - expected
+            for ax in self.periodic:  # a moving wall wraps like the fluid
+                L = float(self.tank_size[ax])
+                off[:, ax] -= L * np.round(off[:, ax] / L)
+            moved = np.abs(off).max(axis=1) > self.wall_tol
             if moved.any():
                 ids = np.flatnonzero(self.wall)[moved]
                 raise InstabilityError(

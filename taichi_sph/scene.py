@@ -93,13 +93,18 @@ def tank_walls(size, dx, layers, open_top=True, periodic=()):
     return pts, normal
 
 
-def obstacle_particles(box_min, box_max, dx):
-    """Wall particles filling a solid box, normals pointing out through the nearest face."""
+def obstacle_particles(box_min, box_max, dx, periodic=(), size=None):
+    """Wall particles filling a solid box, normals pointing out through the nearest face. A face that
+    lies on a periodic side of the tank is no face (the box runs on through the wrap)."""
     lo = np.asarray(box_min, float)
     hi = np.asarray(box_max, float)
     pts = lattice_in_box(lo, hi, dx)
     d_lo = pts - lo
     d_hi = hi - pts
+    for ax in periodic:
+        tol = 1e-9 * max(1.0, float(size[ax]))
+        if lo[ax] <= tol and hi[ax] >= float(size[ax]) - tol:
+            d_lo[:, ax] = d_hi[:, ax] = np.inf
     dist = np.concatenate([d_lo, d_hi], axis=1)
     dim = len(lo)
     # the outward normal of the nearest face; at a corner or an edge (equally near faces) the mean of
@@ -308,7 +313,7 @@ def build_scene(cfg) -> Scene:
     motions = []
     sweep_lo, sweep_hi = np.zeros(dim), size.copy()  # what moving obstacles sweep until end_time
     for box in cfg.obstacles:
-        pts, nrm = obstacle_particles(box.min, box.max, dx)
+        pts, nrm = obstacle_particles(box.min, box.max, dx, tuple(cfg.tank.periodic), size)
         body = -1
         if box.motion is not None:
             body = len(motions)

@@ -57,6 +57,12 @@ CASES = [
     case("ppe-on-failure-bad-choice", ["--set", "isph.ppe.on_failure=ignore"], ["'isph.ppe.on_failure'"]),
     case("surface-density-above-one", ["--set", "isph.surface_density=1.2"], ["'isph.surface_density'"]),
     case("ppe-type-unknown", ["--set", "isph.ppe.type=amg"], ["'isph.ppe.type'"]),
+    case("obstacle-motion-velocity-length",
+         ["--set", "obstacles=[{min: [0.1, 0.1], max: [0.15, 0.15], motion: {velocity: [1, 0, 0]}}]"],
+         ["'obstacles[0].motion.velocity'"]),
+    case("obstacle-motion-stop-before-start",
+         ["--set", "obstacles=[{min: [0.1, 0.1], max: [0.15, 0.15], motion: {velocity: [1, 0], start: 0.2, stop: 0.1}}]"],
+         ["'obstacles[0].motion.stop'"]),
     # a pore lattice dx eps^(-1/dim) beyond the kernel support (2.4 dx) has no neighbours: 2D floor 0.174
     case("eps0-below-the-pore-lattice-floor", ["--config", "configs/darcy_column.yaml", "--set",
                                                "soil.regions.0.eps0=0.1"], ["'soil.regions[0].eps0'", "0.174"]),

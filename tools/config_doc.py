@@ -32,7 +32,8 @@ SECTIONS = [("Config", "top level"), ("Output", "output"), ("Images", "output.im
 SECTIONS += [("WCSPH", "wcsph"), ("WCSPHWater", "wcsph.water"), ("WCSPHAir", "wcsph.air"),
              ("ArtificialViscosity", "wcsph.artificial_viscosity")]
 SECTIONS += [("Checkpoint", "checkpoint"), ("Metric", "metrics[k]")]
-SECTIONS += [("WaterBlock", "water[k] (besides min and max)")]
+SECTIONS += [("WaterBlock", "water[k] (besides min and max)"), ("Obstacle", "obstacles[k] (besides min and max)"),
+             ("ObstacleMotion", "obstacles[k].motion")]
 SECTIONS += [("WCSPHSoil", "wcsph.soil"), ("SoilStartFrom", "wcsph.soil.start_from"), ("InflowSource", "inflow[k]")]
 
 FOOTER = """## Fixed names

@@ -486,7 +486,12 @@ class ISPHSolver(SolverCommon):
                             gw = kernels.grad_w(rij, r, self.h, self.dim)
                             f = operators.laplacian_weight(r, self.h, self.eta2, self.dim)
                             if self.kind[j] == WALL:
-                                vj = operators.mirror_velocity(vi, self.v[j], self.normal[j], self.no_slip)
+                                # impermeability only: the wall's image reverses the velocity normal to it
+                                # (relative to the wall), slip or no-slip; the tangential no-slip condition
+                                # belongs to the viscous term. With the whole velocity reversed, a no-slip
+                                # wall moving along its face put a source 2 m v_w . grad W into every row
+                                # whose wall neighbours are not symmetric about it (near a free surface)
+                                vj = operators.mirror_velocity(vi, self.v[j], self.normal[j], False)
                                 m_w = eps_i * self.mass
                                 div += m_w * (vj - vi).dot(gw)
                             else:

@@ -4,7 +4,8 @@ and stop times. A wall particle's velocity field holds that velocity (zero for f
 wall conditions of both modes take the fluid velocity relative to it:
 
 - mode isph, virtual marker (seed 000): a wall seen from fluid particle i moves with
-  v_w + M (v_i - v_w), M = -1 (no-slip) or the reflection of the normal component (slip);
+  v_w + M (v_i - v_w), M = -1 (no-slip) or the reflection of the normal component (slip), in the
+  viscous term; the PPE's divergence takes only the reflected normal component (impermeability);
 - mode wcsph_biot, Morris/Takeda (seed 002 eq 50-51): the relative velocity v_i - v_B of a boundary
   particle is beta (v_i - v_w) (no-slip), or its normal component (slip).
 

@@ -696,7 +696,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
         order[ids] = np.arange(n)
         kind = self.kind.to_numpy()[order]
         vel = self.v.to_numpy()[order] + 0.5 * self.dt_prev * self.a.to_numpy()[order]
-        vel[kind == WALL] = 0.0
+        wall = kind == WALL
+        vel[wall] = self.v.to_numpy()[order][wall]  # zero, or a moving obstacle's velocity
         rho = self.rho.to_numpy()[order]
         rho = np.where(kind == WALL, self.rho_w, rho)
         out = {
