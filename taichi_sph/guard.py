@@ -96,15 +96,17 @@ class StabilityGuard:
         self.wall0 = None
         # obstacles with a prescribed motion (sph/wall_motion.py): index of each wall particle's motion
         self.motions = list(motions)
-        self.periodic = [ax for ax in cfg.tank.periodic if ax < cfg.dim] if self.motions else []
-        self.tank_size = list(cfg.tank.size)
+        self.periodic, self.tank_size = [], []
+        if self.motions:  # a moving wall wraps across periodic sides like the fluid
+            self.periodic = [ax for ax in cfg.tank.periodic if ax < cfg.dim]
+            self.tank_size = list(cfg.tank.size)
         self.wall_body = np.asarray(body)[self.wall] if body is not None else np.full(int(self.wall.sum()), -1)
 
     def _wall_displacement(self, time: float) -> np.ndarray:
         """Where the motions have moved each wall particle by `time` (zero for fixed walls)."""
         from .sph.wall_motion import displacement
 
-        out = np.zeros((len(self.wall_body), self.kind_dim))
+        out = np.zeros((len(self.wall_body), self.pos_dim))
         for b, m in enumerate(self.motions):
             out[self.wall_body == b] = displacement(m, time)
         return out
@@ -112,7 +114,7 @@ class StabilityGuard:
     def start(self, fields: dict, time: float = 0.0) -> None:
         """Remember where the walls were at t = 0 (a resumed run: where they are less their motion)."""
         pos = np.asarray(fields["position"], dtype=float)
-        self.kind_dim = pos.shape[1]
+        self.pos_dim = pos.shape[1]
         self.wall0 = np.array(pos[self.wall], dtype=float)
         if self.motions:
             self.wall0 -= self._wall_displacement(time)

@@ -84,6 +84,27 @@ def test_moving_wall_exits_6():
     assert exc.exit_code == 6 and exc.quantity == "wall position" and exc.particles == [4]
 
 
+def test_wall_of_a_moving_obstacle_must_follow_its_motion():
+    """Wall particle 4 belongs to an obstacle moving at 0.5 m/s along x from t = 0.1 s (sph/wall_motion.py):
+    at 0.3 s it must be 0.1 m further on; there it passes, left behind it stops the run (exit 6). A
+    resumed run's guard starts from the walls' places at that time."""
+    body = np.full(len(KIND), -1)
+    body[4] = 0
+    motion = (np.array([0.5, 0.0]), 0.1, np.inf)
+    cfg = _cfg()
+    cfg.tank, cfg.dim = SimpleNamespace(periodic=[], size=[1.0, 1.0]), 2
+    g = StabilityGuard(cfg, KIND, RHO_REF, speed_bound=5.0, body=body, motions=[motion])
+    g.start(_fields())
+    f = _fields()
+    f["position"][4, 0] += 0.1
+    g.check_fields(9, 0.3, f)
+    exc = _raised(lambda: g.check_fields(9, 0.3, _fields()))
+    assert exc.exit_code == 6 and exc.particles == [4] and "prescribed motion" in str(exc)
+    resumed = StabilityGuard(cfg, KIND, RHO_REF, speed_bound=5.0, body=body, motions=[motion])
+    resumed.start(f, 0.3)
+    resumed.check_fields(9, 0.3, f)
+
+
 def test_speed_bound_and_nan_speed():
     g = _guard()
     g.after_step(1, 0.01, {"max_speed": 4.9}, lambda: 0)

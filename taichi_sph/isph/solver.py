@@ -623,8 +623,8 @@ class ISPHSolver(SolverCommon):
         """Near-contact collisions. Water pairs closer than r_coll that approach lose (1 + e)/2 of their
         relative normal velocity (equal masses). At walls the kinematic condition v . n >= 0 is enforced
         on particles closer to the wall surface than r_coll / 2 (a particle at rest sits dx / 2 from it):
-        the velocity into the wall (relative to it, when it moves) is reversed with restitution e. The wall surface lies dx / 2 beyond
-        the first wall layer along the wall particle's normal."""
+        the velocity into the wall (relative to it, when it moves) is reversed with restitution e. The
+        wall surface lies dx / 2 beyond the first wall layer along the wall particle's normal."""
         self.collisions[None] = 0
         for i in range(self.n):
             if self.solve_mask[i] == 1:

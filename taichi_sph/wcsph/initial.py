@@ -61,9 +61,10 @@ def head_pressure(cfg, position: np.ndarray, kind: np.ndarray, p: np.ndarray, rh
         taken |= inside
 
 
-def wall_depth(position: np.ndarray, kind: np.ndarray, tank_size, obstacles) -> np.ndarray:
+def wall_depth(position: np.ndarray, kind: np.ndarray, tank_size, obstacles, periodic=()) -> np.ndarray:
     """d_B of eq 51 for wall particles (0 for others): the distance of a tank-wall particle from the
-    tank interior [0, size], or of an obstacle particle from the nearest face of its obstacle."""
+    tank interior [0, size], or of an obstacle particle from the nearest face of its obstacle (an
+    obstacle that spans a periodic axis has no faces across it, as in scene.obstacle_particles)."""
     size = np.asarray(tank_size, float)
     depth = np.zeros(len(position))
     wall = kind == WALL
@@ -73,7 +74,11 @@ def wall_depth(position: np.ndarray, kind: np.ndarray, tank_size, obstacles) -> 
     for box in obstacles:
         lo, hi = np.asarray(box.min, float), np.asarray(box.max, float)
         within = inside & np.all((p >= lo) & (p <= hi), axis=1)
-        face = np.minimum(p[within] - lo, hi - p[within]).min(axis=1)
+        gap = np.minimum(p[within] - lo, hi - p[within])
+        for ax in periodic:
+            if lo[ax] <= 1e-9 * max(1.0, size[ax]) and hi[ax] >= size[ax] * (1 - 1e-9):
+                gap[:, ax] = np.inf
+        face = gap.min(axis=1)
         d[within] = face
     depth[wall] = d
     return depth
@@ -117,7 +122,7 @@ def initial_state(cfg, scene, materials: dict) -> dict:
             face = inside & (x[:, 0] > x[inside, 0].max() - 0.5 * dx)
             vel[face, 0] = np.sqrt(2.0 * g_down * np.maximum(hi[-1] - x[face, -1], 0.0))
     out = {"density": rho, "mass": mass, "velocity": vel, "pressure": p,
-           "wall_depth": wall_depth(scene.position, kind, cfg.tank.size, cfg.obstacles)}
+           "wall_depth": wall_depth(scene.position, kind, cfg.tank.size, cfg.obstacles, tuple(cfg.tank.periodic))}
     out["stress"] = soil_start(cfg, scene, rho, mass, materials[WATER][0])
     stage = load_stage(cfg, scene)
     if stage is not None:  # two-stage run: the soil of the earlier stage (stage.py)
