@@ -37,6 +37,19 @@ def mirror_velocity(v_i, v_w, n_w, no_slip: ti.template()):
 
 
 @ti.func
+def wall_mirror_solve(s, m_wall, along_equilibrium):
+    """Gradient-like sum G = s + m_wall G of a particle whose wall neighbours carry the mirror image of
+    the field along their faces (docs/wcsph.md, "Walls"): G = (I - m_wall)^-1 s, m_wall = sum over walls
+    V grad W (x) d_t. Where I - m_wall is near singular (det < 0.25), the walls take the equilibrium
+    gradient along their faces too: s + along_equilibrium, the same terms with that gradient."""
+    a = ti.Matrix.identity(float, s.n) - m_wall
+    out = s + along_equilibrium
+    if ti.abs(a.determinant()) > 0.25:
+        out = a.inverse() @ s
+    return out
+
+
+@ti.func
 def wall_pressure(p_i, rho_w, g, x_w, x_i):
     """Wall pressure seen from fluid particle i: Neumann condition with hydrostatic correction,
     P_w = P_i + rho_w g . (x_w - x_i)."""

@@ -243,21 +243,9 @@ class SoilStep:
                     elif kj == WATER:  # noqa: SIM102 (compile-time if)
                         if ti.static(self.coupled):
                             gradp += sj[self.S_M] / self.rho[j] * (self.p[j] - pore_i) * gw
-                s_mat = ti.Matrix.identity(float, self.dim) - ms_wall
-                if ti.abs(s_mat.determinant()) > 0.25:
-                    accs = s_mat.inverse() @ accs
-                else:
-                    accs += hyds_t
-                acc += accs
-                if ti.static(self.coupled):
-                    # G_i = gradp + m_wall G_i, solved locally; where I - m_wall is near singular the
-                    # wall is extrapolated hydrostatically along its face too
-                    a_mat = ti.Matrix.identity(float, self.dim) - m_wall
-                    if ti.abs(a_mat.determinant()) > 0.25:
-                        gradp = a_mat.inverse() @ gradp
-                    else:
-                        gradp += hyd_t
-                    acc -= gradp / self.rho_g
+                acc += operators.wall_mirror_solve(accs, ms_wall, hyds_t)
+                if ti.static(self.coupled):  # G_i = gradp + m_wall G_i
+                    acc -= operators.wall_mirror_solve(gradp, m_wall, hyd_t) / self.rho_g
                 acc -= self.damping * vi
                 if ti.static(self.soil_fixed):
                     acc = ti.Vector.zero(float, self.dim)

@@ -574,14 +574,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
                         else:
                             nuj = self._nu(ti.cast(kj, ti.i32))
                             acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nuj, f_ij) * vij
-                # a_p = A_p + m_wall a_p (the walls' tangential terms carry G_i = -rho_i a_p), solved
-                # locally; where I - m_wall is near singular, the walls are hydrostatic along their faces too
-                a_mat = ti.Matrix.identity(float, self.dim) - m_wall
-                if ti.abs(a_mat.determinant()) > 0.25:
-                    accp = a_mat.inverse() @ accp
-                else:
-                    accp += hyd_t
-                acc += accp
+                # a_p = A_p + m_wall a_p (the walls' tangential terms carry G_i = -rho_i a_p)
+                acc += operators.wall_mirror_solve(accp, m_wall, hyd_t)
                 self.a[i] = acc
                 # reductions
                 vs = vi + 0.5 * dt * acc  # synchronised velocity at this time
