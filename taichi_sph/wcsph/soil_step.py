@@ -177,14 +177,15 @@ class SoilStep:
                 pore_i = self.pore[i]
                 acc = self.g
                 gradp = ti.Vector.zero(float, self.dim)
-                # wall share of the pore-pressure gradient that depends on the gradient itself (below)
-                m_wall = ti.Matrix.zero(float, self.dim, self.dim)
-                hyd_t = ti.Vector.zero(float, self.dim)  # the same terms with the hydrostatic gradient
-                # stress acceleration, and the walls' share of it through its own gradient (as for the pore
-                # pressure: the stress at a wall is the soil's across it, the gradient at i along it)
+                # stress acceleration; the walls carry the stress and the pore pressure across their faces
+                # by the equilibrium gradient and along them by the gradient at i (operators.wall_mirror_solve):
+                # m_wall = sum V grad W (x) d_t and g_t = sum V (g . d_t) grad W over the walls serve both
                 accs = ti.Vector.zero(float, self.dim)
-                ms_wall = ti.Matrix.zero(float, self.dim, self.dim)
-                hyds_t = ti.Vector.zero(float, self.dim)
+                m_wall = ti.Matrix.zero(float, self.dim, self.dim)
+                g_t = ti.Vector.zero(float, self.dim)
+                b_fac = 1.0  # the buoyant share of the soil's weight, (1 - phi_w rho_w / rho_s)
+                if ti.static(self.coupled):
+                    b_fac = 1.0 - self.phi_w[i] * self.rho_w / self.rho_g
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
@@ -209,17 +210,14 @@ class SoilStep:
                         xw = xi - rij  # the wall particle's nearest image
                         db = self.wdepth[j]
                         nrm = self.normal[j]
-                        # (its equilibrium gradient: the buoyant unit weight (1 - phi_w rho_w / rho_s) rho g
-                        # where water fills the pores, whose pressure the pore term below extrapolates)
-                        g_b = self.g
-                        if ti.static(self.coupled):
-                            g_b *= 1.0 - self.phi_w[i] * self.rho_w / self.rho_g
+                        # (its equilibrium gradient: the buoyant unit weight b_fac rho g where water fills
+                        # the pores, whose pressure the pore term below extrapolates)
                         dxw = xw - xi
                         dxn = dxw.dot(nrm) * nrm
-                        dsig = rhoi * g_b.dot(dxn)
+                        dsig = b_fac * rhoi * self.g.dot(dxn)
                         mw = rhoi * self.vol0
-                        ms_wall += self.vol0 * gw.outer_product(dxw - dxn)
-                        hyds_t -= self.vol0 * g_b.dot(dxw - dxn) * gw
+                        m_wall += self.vol0 * gw.outer_product(dxw - dxn)
+                        g_t += self.vol0 * self.g.dot(dxw - dxn) * gw
                         sw_r = si_r
                         if ti.static(not self.no_slip):
                             # a slip wall carries no shear traction: the mirror image of the stress across
@@ -235,17 +233,15 @@ class SoilStep:
                         if ti.static(self.coupled):
                             # pore pressure at the wall particle: hydrostatic across the wall (no flow
                             # through it), the gradient at i along it (the mirror image of the excess
-                            # pressure): p_w - p_i = rho_w g . dx_n + G_i . dx_t
-                            wgt = self.phi_w[i] * self.vol0
-                            gradp += wgt * self.rho_w * self.g.dot(dxn) * gw
-                            m_wall += wgt * gw.outer_product(dxw - dxn)
-                            hyd_t += wgt * self.rho_w * self.g.dot(dxw - dxn) * gw
+                            # pressure): p_w - p_i = rho_w g . dx_n + G_i . dx_t, weighted by phi_w
+                            gradp += self.phi_w[i] * self.vol0 * self.rho_w * self.g.dot(dxn) * gw
                     elif kj == WATER:  # noqa: SIM102 (compile-time if)
                         if ti.static(self.coupled):
                             gradp += sj[self.S_M] / self.rho[j] * (self.p[j] - pore_i) * gw
-                acc += operators.wall_mirror_solve(accs, ms_wall, hyds_t)
-                if ti.static(self.coupled):  # G_i = gradp + m_wall G_i
-                    acc -= operators.wall_mirror_solve(gradp, m_wall, hyd_t) / self.rho_g
+                acc += operators.wall_mirror_solve(accs, m_wall, -b_fac * g_t)
+                if ti.static(self.coupled):  # G_i = gradp + phi_w m_wall G_i
+                    pw = self.phi_w[i]
+                    acc -= operators.wall_mirror_solve(gradp, pw * m_wall, pw * self.rho_w * g_t) / self.rho_g
                 acc -= self.damping * vi
                 if ti.static(self.soil_fixed):
                     acc = ti.Vector.zero(float, self.dim)
