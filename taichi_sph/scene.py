@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .sph.kernels import SUPPORT_FACTOR
+from .sph.wall_motion import displacement
 
 WATER, WALL, SOIL, AIR = 0, 1, 2, 3
 KIND_NAMES = {WATER: "water", WALL: "wall", SOIL: "soil", AIR: "air"}
@@ -320,7 +321,7 @@ def build_scene(cfg) -> Scene:
             m = box.motion
             stop = math.inf if m.stop is None else float(m.stop)
             motions.append((np.asarray(m.velocity, float), float(m.start), stop))
-            moved = np.asarray(m.velocity, float) * max(0.0, min(stop, cfg.end_time) - m.start)
+            moved = displacement(motions[-1], cfg.end_time)
             sweep_lo = np.minimum(sweep_lo, np.asarray(box.min, float) + np.minimum(moved, 0.0))
             sweep_hi = np.maximum(sweep_hi, np.asarray(box.max, float) + np.maximum(moved, 0.0))
         wall = np.concatenate([wall, pts])
