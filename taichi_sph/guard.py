@@ -104,11 +104,9 @@ class StabilityGuard:
 
     def _wall_displacement(self, time: float) -> np.ndarray:
         """Where the motions have moved each wall particle by `time` (zero for fixed walls)."""
-        from .sph.wall_motion import displacement
-
         out = np.zeros((len(self.wall_body), self.pos_dim))
         for b, m in enumerate(self.motions):
-            out[self.wall_body == b] = displacement(m, time)
+            out[self.wall_body == b] = m.displacement(time)
         return out
 
     def start(self, fields: dict, time: float = 0.0) -> None:

@@ -9,13 +9,12 @@ a unit normal pointing into the fluid (used by slip walls and the wall pressure 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .sph.kernels import SUPPORT_FACTOR
-from .sph.wall_motion import displacement
+from .sph.wall_motion import Motion
 
 WATER, WALL, SOIL, AIR = 0, 1, 2, 3
 KIND_NAMES = {WATER: "water", WALL: "wall", SOIL: "soil", AIR: "air"}
@@ -37,7 +36,7 @@ class Scene:
     inflow_rows: list = field(default_factory=list)  # per inflow source, its rows of reserve ids (wcsph/inflow.py)
     #: per particle, the index into `motions` of the moving obstacle it belongs to, -1 for all else
     body: np.ndarray | None = None
-    #: prescribed motion of each moving obstacle: (velocity (dim,), start, stop or inf)
+    #: prescribed motion of each moving obstacle (sph.wall_motion.Motion)
     motions: list = field(default_factory=list)
 
     @property
@@ -318,12 +317,10 @@ def build_scene(cfg) -> Scene:
         body = -1
         if box.motion is not None:
             body = len(motions)
-            m = box.motion
-            stop = math.inf if m.stop is None else float(m.stop)
-            motions.append((np.asarray(m.velocity, float), float(m.start), stop))
-            moved = displacement(motions[-1], cfg.end_time)
-            sweep_lo = np.minimum(sweep_lo, np.asarray(box.min, float) + np.minimum(moved, 0.0))
-            sweep_hi = np.maximum(sweep_hi, np.asarray(box.max, float) + np.maximum(moved, 0.0))
+            motions.append(Motion.from_config(box.motion))
+            d_lo, d_hi = motions[-1].reach(cfg.end_time)
+            sweep_lo = np.minimum(sweep_lo, np.asarray(box.min, float) + d_lo)
+            sweep_hi = np.maximum(sweep_hi, np.asarray(box.max, float) + d_hi)
         wall = np.concatenate([wall, pts])
         wall_n = np.concatenate([wall_n, nrm])
         wall_body = np.concatenate([wall_body, np.full(len(pts), body, np.int32)])

@@ -10,6 +10,7 @@ import pytest
 from taichi_sph.errors import EXIT_BY_FAMILY, InstabilityError
 from taichi_sph.guard import StabilityGuard, flag_field, out_of_domain, solver_failure
 from taichi_sph.io.hdf5 import RunFile
+from taichi_sph.sph.wall_motion import Motion
 
 KIND = np.array([0, 0, 0, 1, 1, 3])  # water, water, water, wall, wall, air
 RHO_REF = np.array([1000.0, 1000.0, 1000.0, 1000.0, 1000.0, 1.2])
@@ -90,7 +91,7 @@ def test_wall_of_a_moving_obstacle_must_follow_its_motion():
     resumed run's guard starts from the walls' places at that time."""
     body = np.full(len(KIND), -1)
     body[4] = 0
-    motion = (np.array([0.5, 0.0]), 0.1, np.inf)
+    motion = Motion(start=0.1, stop=np.inf, velocity=np.array([0.5, 0.0]))
     cfg = _cfg()
     cfg.tank, cfg.dim = SimpleNamespace(periodic=[], size=[1.0, 1.0]), 2
     g = StabilityGuard(cfg, KIND, RHO_REF, speed_bound=5.0, body=body, motions=[motion])

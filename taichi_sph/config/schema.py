@@ -207,14 +207,20 @@ class Tank(Strict):
 
 
 class ObstacleMotion(Strict):
-    """Prescribed motion of an obstacle: a rigid translation at constant velocity between `start` and
-    `stop` (a plate sliding along its face, a gate, a piston). The obstacle's wall particles carry this
-    velocity in the wall conditions of both modes (slip and no-slip are taken relative to it; across a
-    periodic side the obstacle wraps). A face moving away from the water faster than the water can
-    follow does not let go of it: see docs/moving_obstacles.md."""
+    """Prescribed motion of an obstacle between `start` and `stop`: a rigid translation at constant
+    `velocity` (a plate sliding along its face, a gate, a piston), or an oscillation of displacement
+    `amplitude` sin(2 pi (t - start) / `period`) (a paddle). Give `velocity`, or `amplitude` and
+    `period`. The obstacle's wall particles carry its velocity in the wall conditions of both modes
+    (slip and no-slip are taken relative to it; across a periodic side the obstacle wraps). A face
+    moving away from the water faster than the water can follow does not let go of it: see
+    docs/moving_obstacles.md."""
 
-    #: velocity (m/s), dim components
-    velocity: list[float]
+    #: constant velocity (m/s), dim components
+    velocity: Optional[list[float]] = None
+    #: displacement amplitude of an oscillation (m), dim components
+    amplitude: Optional[list[float]] = None
+    #: period of the oscillation (s)
+    period: Optional[PosFloat] = None
     #: time the motion starts (s)
     start: NonNegFloat = 0.0
     #: time the motion stops (s); default: never (it runs to end_time)
@@ -716,13 +722,23 @@ def check(cfg: "Config") -> None:
 
 
 def _check_motions(cfg: "Config") -> None:
-    """Moving obstacles: a velocity per axis and stop after start."""
+    """Moving obstacles: a constant velocity or an oscillation (amplitude and period), one value per
+    axis, and stop after start."""
     for k, box in enumerate(cfg.obstacles):
         m = box.motion
         if m is None:
             continue
         key = f"obstacles[{k}].motion"
-        _need_len(m.velocity, cfg.dim, f"{key}.velocity")
+        if (m.velocity is None) == (m.amplitude is None):
+            _fail(key, "give either velocity or amplitude (with period)")
+        if m.velocity is not None:
+            _need_len(m.velocity, cfg.dim, f"{key}.velocity")
+            if m.period is not None:
+                _fail(f"{key}.period", "belongs to an oscillation (amplitude), not to a constant velocity")
+        else:
+            _need_len(m.amplitude, cfg.dim, f"{key}.amplitude")
+            if m.period is None:
+                _fail(f"{key}.period", "is needed with amplitude")
         if m.stop is not None and m.stop <= m.start:
             _fail(f"{key}.stop", f"must be later than start = {m.start}")
 

@@ -9,10 +9,14 @@ wall conditions of both modes take the fluid velocity relative to it:
 - mode wcsph_biot, Morris/Takeda (seed 002 eq 50-51): the relative velocity v_i - v_B of a boundary
   particle is beta (v_i - v_w) (no-slip), or its normal component (slip).
 
-The wall pressure keeps its hydrostatic Neumann form: the motion is at constant velocity, so the
-wall's acceleration (the rho a_w . n term of the Neumann condition) is zero except at the start and
-stop instants. A gate lifted along its own face has no normal velocity at all.
+A motion is a constant velocity, or an oscillation x(t) = A sin(2 pi (t - start) / T) (a paddle,
+Stokes' second problem), between its start and stop times. The wall pressure keeps its hydrostatic
+Neumann form: the wall's acceleration (the rho a_w . n term of the Neumann condition) is left out,
+which is exact for a constant velocity and for a wall oscillating along its own face.
 """
+
+import math
+from dataclasses import dataclass
 
 import numpy as np
 import taichi as ti
@@ -20,19 +24,43 @@ import taichi as ti
 from . import operators
 
 
-def step_velocity(motion, t0: float, t1: float) -> np.ndarray:
-    """Mean velocity of one motion (velocity, start, stop) over the step [t0, t1]: its velocity times
-    the fraction of the step inside [start, stop], so that summing steps moves the body exactly
-    velocity * (stop - start)."""
-    vel, start, stop = motion
-    inside = max(0.0, min(t1, stop) - max(t0, start))
-    return vel * (inside / (t1 - t0)) if t1 > t0 else np.zeros_like(vel)
+@dataclass(frozen=True)
+class Motion:
+    """A rigid translation: constant `velocity` (m/s), or the oscillation A sin(2 pi tau / period) with
+    displacement amplitude `amplitude` (m), tau the time since `start`, both between `start` and `stop`
+    (s; inf: to the end)."""
 
+    start: float
+    stop: float
+    velocity: np.ndarray | None = None
+    amplitude: np.ndarray | None = None
+    period: float = 0.0
 
-def displacement(motion, t: float) -> np.ndarray:
-    """Displacement of a moving obstacle at time t from its configured place."""
-    vel, start, stop = motion
-    return vel * max(0.0, min(t, stop) - start)
+    @classmethod
+    def from_config(cls, m) -> "Motion":
+        stop = math.inf if m.stop is None else float(m.stop)
+        if m.amplitude is not None:
+            return cls(float(m.start), stop, amplitude=np.asarray(m.amplitude, float), period=float(m.period))
+        return cls(float(m.start), stop, velocity=np.asarray(m.velocity, float))
+
+    def displacement(self, t: float) -> np.ndarray:
+        """Displacement at time t from the configured place."""
+        tau = max(0.0, min(t, self.stop) - self.start)
+        if self.amplitude is not None:
+            return self.amplitude * math.sin(2.0 * math.pi * tau / self.period)
+        return self.velocity * tau
+
+    def step_velocity(self, t0: float, t1: float) -> np.ndarray:
+        """Mean velocity over the step [t0, t1] (displacement over the step / its length), so that the
+        body is moved by exactly its displacement."""
+        return (self.displacement(t1) - self.displacement(t0)) / (t1 - t0)
+
+    def reach(self, end_time: float) -> tuple[np.ndarray, np.ndarray]:
+        """Smallest and largest displacement per axis up to end_time (to size the neighbour grid)."""
+        if self.amplitude is not None:
+            return -np.abs(self.amplitude), np.abs(self.amplitude)
+        d = self.displacement(end_time)
+        return np.minimum(d, 0.0), np.maximum(d, 0.0)
 
 
 @ti.data_oriented
@@ -70,8 +98,8 @@ class WallMotion:
     def set_step(self, t0: float, t1: float) -> None:
         """Velocity of every body over the step [t0, t1] and its displacement at t1."""
         if self.motions:
-            self.vel.from_numpy(np.stack([step_velocity(m, t0, t1) for m in self.motions]).astype(self.np_fp))
-            self.disp.from_numpy(np.stack([displacement(m, t1) for m in self.motions]).astype(self.np_fp))
+            self.vel.from_numpy(np.stack([m.step_velocity(t0, t1) for m in self.motions]).astype(self.np_fp))
+            self.disp.from_numpy(np.stack([m.displacement(t1) for m in self.motions]).astype(self.np_fp))
 
     @ti.func
     def position(self, i):
