@@ -93,18 +93,26 @@ def tank_walls(size, dx, layers, open_top=True, periodic=()):
     return pts, normal
 
 
+def spanned_periodic_axes(lo, hi, size, periodic) -> list:
+    """Periodic axes a box spans from side to side: it runs on through the wrap and has no faces there."""
+    out = []
+    for ax in periodic:
+        tol = 1e-9 * max(1.0, float(size[ax]))
+        if lo[ax] <= tol and hi[ax] >= float(size[ax]) - tol:
+            out.append(ax)
+    return out
+
+
 def obstacle_particles(box_min, box_max, dx, periodic=(), size=None):
-    """Wall particles filling a solid box, normals pointing out through the nearest face. A face that
-    lies on a periodic side of the tank is no face (the box runs on through the wrap)."""
+    """Wall particles filling a solid box, normals pointing out through the nearest face (none across a
+    periodic axis the box spans, `spanned_periodic_axes`)."""
     lo = np.asarray(box_min, float)
     hi = np.asarray(box_max, float)
     pts = lattice_in_box(lo, hi, dx)
     d_lo = pts - lo
     d_hi = hi - pts
-    for ax in periodic:
-        tol = 1e-9 * max(1.0, float(size[ax]))
-        if lo[ax] <= tol and hi[ax] >= float(size[ax]) - tol:
-            d_lo[:, ax] = d_hi[:, ax] = np.inf
+    for ax in spanned_periodic_axes(lo, hi, size, periodic):
+        d_lo[:, ax] = d_hi[:, ax] = np.inf
     dist = np.concatenate([d_lo, d_hi], axis=1)
     dim = len(lo)
     # the outward normal of the nearest face; at a corner or an edge (equally near faces) the mean of

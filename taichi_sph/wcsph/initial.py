@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene import AIR, SOIL, WALL, WATER, soil_block_index
+from ..scene import AIR, SOIL, WALL, WATER, soil_block_index, spanned_periodic_axes
 from . import eos
 from .soil import geostatic_stress
 from .stage import apply_stage, load_stage
@@ -64,7 +64,7 @@ def head_pressure(cfg, position: np.ndarray, kind: np.ndarray, p: np.ndarray, rh
 def wall_depth(position: np.ndarray, kind: np.ndarray, tank_size, obstacles, periodic=()) -> np.ndarray:
     """d_B of eq 51 for wall particles (0 for others): the distance of a tank-wall particle from the
     tank interior [0, size], or of an obstacle particle from the nearest face of its obstacle (an
-    obstacle that spans a periodic axis has no faces across it, as in scene.obstacle_particles)."""
+    obstacle that spans a periodic axis has no faces across it, scene.spanned_periodic_axes)."""
     size = np.asarray(tank_size, float)
     depth = np.zeros(len(position))
     wall = kind == WALL
@@ -75,9 +75,7 @@ def wall_depth(position: np.ndarray, kind: np.ndarray, tank_size, obstacles, per
         lo, hi = np.asarray(box.min, float), np.asarray(box.max, float)
         within = inside & np.all((p >= lo) & (p <= hi), axis=1)
         gap = np.minimum(p[within] - lo, hi - p[within])
-        for ax in periodic:
-            if lo[ax] <= 1e-9 * max(1.0, size[ax]) and hi[ax] >= size[ax] * (1 - 1e-9):
-                gap[:, ax] = np.inf
+        gap[:, spanned_periodic_axes(lo, hi, size, periodic)] = np.inf
         face = gap.min(axis=1)
         d[within] = face
     depth[wall] = d
