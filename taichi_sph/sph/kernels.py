@@ -7,6 +7,15 @@ the same function. Normalisation sigma_d: 2/(3h) in 1D, 10/(7 pi h^2) in 2D, 1/(
     W(q) = sigma_d * (1 - 1.5 q^2 + 0.75 q^3)   0 <= q < 1
          = sigma_d * 0.25 (2 - q)^3             1 <= q < 2
          = 0                                    q >= 2,       q = r / h
+
+Gradient normalised to the particle lattice. On the square/cubic lattice of spacing dx the first
+moment of the kernel gradient, sum_j V_j (x_j - x_i) (x) grad_i W_ij with V_j = dx^d, is G I with
+G = 0.99079 (2D) / 0.98169 (3D) instead of I (the continuous integral): the SPH gradient of a linear
+field (eq 12-13, 34-36), the divergence (eq 23) and the Laplacian of a quadratic field (eq 14, 22, 24)
+all read G times the exact value. As r_e / dx is fixed, that error does not shrink with dx. dW/dr is
+therefore divided by G (`GRADIENT_SCALE`), which makes these operators exact on the lattice. A
+constant factor keeps every symmetric pair form antisymmetric (momentum is conserved as before), and
+the kernel-gradient-corrected gradient (L_i grad W) does not change.
 """
 
 import math
@@ -55,11 +64,38 @@ def w(r, h, dim: ti.template()):
     return val
 
 
+def _dw_dq_shape_np(q: np.ndarray) -> np.ndarray:
+    """d/dq of the unnormalised cubic B-spline shape, numpy."""
+    return np.where(q < 1.0, -3.0 * q + 2.25 * q**2, np.where(q < 2.0, -0.75 * (2.0 - q) ** 2, 0.0))
+
+
+def _lattice_points(dim: int, support_factor: float) -> np.ndarray:
+    """Lattice offsets (unit spacing) strictly inside the support, the origin excluded."""
+    n = int(math.ceil(support_factor)) + 1
+    rng = np.arange(-n, n + 1, dtype=float)
+    pts = np.stack([g.ravel() for g in np.meshgrid(*([rng] * dim), indexing="ij")], axis=1)
+    r = np.linalg.norm(pts, axis=1)
+    return pts[(r > 0) & (r < support_factor)]
+
+
+def _raw_gradient_moment(dim: int, support_factor: float = SUPPORT_FACTOR) -> float:
+    """G = sum_j (x_j - x_i)_0 dW_ij/dx_i0 dx^d of the unnormalised gradient on the lattice."""
+    h = support_factor / 2.0
+    p = _lattice_points(dim, support_factor)
+    r = np.linalg.norm(p, axis=1)
+    dwdr = sigma(dim, h) / h * _dw_dq_shape_np(r / h)
+    return float(np.sum(p[:, 0] * dwdr * (-p[:, 0]) / r))
+
+
+#: factor on dW/dr per dimension: 1 / G, G the lattice moment of the unnormalised gradient (module doc)
+GRADIENT_SCALE = {d: 1.0 / _raw_gradient_moment(d) for d in (1, 2, 3)}
+
+
 @ti.func
 def dw_dr(r, h, dim: ti.template()):
-    """Radial derivative dW/dr (<= 0)."""
+    """Radial derivative dW/dr (<= 0), lattice-normalised (module doc)."""
     q = r / h
-    s = _sigma(h, dim)
+    s = _sigma(h, dim) * ti.static(GRADIENT_SCALE[dim])
     val = 0.0
     if q < 1.0:
         val = s / h * (-3.0 * q + 2.25 * q * q)
@@ -70,18 +106,20 @@ def dw_dr(r, h, dim: ti.template()):
 
 @ti.func
 def w_and_dw_dr(r, h, dim: ti.template()):
-    """Kernel value W and radial derivative dW/dr together, for 0 <= r < 2 h (one branch on q)."""
+    """Kernel value W and radial derivative dW/dr (lattice-normalised as `dw_dr`) together, for
+    0 <= r < 2 h (one branch on q)."""
     q = r / h
     s = _sigma(h, dim)
+    sg = s * ti.static(GRADIENT_SCALE[dim])
     val = 0.0
     der = 0.0
     if q < 1.0:
         val = s * (1.0 - 1.5 * q * q + 0.75 * q * q * q)
-        der = s / h * (-3.0 * q + 2.25 * q * q)
+        der = sg / h * (-3.0 * q + 2.25 * q * q)
     else:
         t = 2.0 - q
         val = s * 0.25 * t * t * t
-        der = -s / h * 0.75 * t * t
+        der = -sg / h * 0.75 * t * t
     return val, der
 
 
@@ -101,10 +139,9 @@ def w_np(r: np.ndarray, h: float, dim: int) -> np.ndarray:
 
 
 def dw_dr_np(r: np.ndarray, h: float, dim: int) -> np.ndarray:
-    """Radial derivative on numpy arrays; same formula as `dw_dr`."""
+    """Radial derivative on numpy arrays; same formula as `dw_dr` (lattice-normalised)."""
     q = np.asarray(r, dtype=float) / h
-    out = np.where(q < 1.0, -3.0 * q + 2.25 * q**2, np.where(q < 2.0, -0.75 * (2.0 - q) ** 2, 0.0))
-    return sigma(dim, h) / h * out
+    return sigma(dim, h) * GRADIENT_SCALE[dim] / h * _dw_dq_shape_np(q)
 
 
 def lattice_sums(dim: int, support_factor: float = SUPPORT_FACTOR) -> dict:
@@ -112,8 +149,9 @@ def lattice_sums(dim: int, support_factor: float = SUPPORT_FACTOR) -> dict:
 
     Returns the neighbour count (self excluded), the kernel sum S = sum_j W_ij dx^d (self
     included; the lattice's departure from partition of unity), and the gradient-moment factor
-    G = sum_j (x_j - x_i)_0 dW_ij/dx_i0 dx^d (1 for an exact first-order gradient). These constants
-    make reference densities and free-surface thresholds consistent with the discrete lattice.
+    G = sum_j (x_j - x_i)_0 dW_ij/dx_i0 dx^d (1 for an exact first-order gradient; 1 by construction of
+    `GRADIENT_SCALE` at the default support). These constants make reference densities and
+    free-surface thresholds consistent with the discrete lattice.
     """
     h = support_factor / 2.0
     n = int(math.ceil(support_factor)) + 1
