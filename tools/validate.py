@@ -520,18 +520,20 @@ def plot_case(c: Case, result: dict, img_dir: Path) -> str | None:
 
 
 DIAGNOSES = {
-    "channel_startup": "mode wcsph_biot's centre runs ahead of the series, 8 / 6 / 4 % at dx 4 / 2 / 1 mm, the "
-                       "column next to each wall most (15 % at 2 mm; isph 8 %), and the falling slab carries a "
-                       "uniform tension of ~-80 Pa from its hydrostatic start. Before the walls mirrored the "
-                       "pressure along their faces (docs/wcsph.md, Walls), they pushed the water beside them up "
-                       "with the hydrostatic gradient, which a falling slab does not have: 3 % at every dx, "
-                       "not converging. Artificial viscosity, XSPH, beta_max and the start density each move it "
-                       "by under 0.5 %; the source is not yet identified.",
+    "channel_startup": "mode wcsph_biot's centre runs ahead of the series, 8 / 5 / 4 % at dx 4 / 2 / 1 mm, the "
+                       "column next to each wall most (15 % at 2 mm before the change below; isph 8 %), and the "
+                       "falling slab carries a uniform tension of ~-80 Pa from its hydrostatic start. Normalising the kernel gradient to "
+                       "the lattice (the viscous Laplacian read 0.991 of the exact value) took the error from "
+                       "0.069 / 0.040 / 0.030 to 0.064 / 0.035 / 0.026 (isph: 0.046 / 0.012 / 0.0096 to 0.042 / "
+                       "0.0079 / 0.0048). Artificial viscosity, XSPH, beta_max and the start density each move it "
+                       "by under 0.5 %; the source of the rest is not yet identified.",
     "hydrostatic": "mode isph is within 0.07 % at every resolution (gravity enters its PPE as a potential, so "
-                   "rest is exact) and comes to rest; mode wcsph_biot's floor pressure carries the eq 27 "
-                   "normalisation over the bottom rows (0.7-0.9 %, not falling with dx) and at 0.5 s still "
-                   "moves with its start-up acoustic transient (the speed bound is meant after 5 s: the full "
-                   "setting).",
+                   "rest is exact) and comes to rest. Mode wcsph_biot's floor value is its bottom row's pressure, "
+                   "which reads 27 Pa (0.9 %) low at 36 particles deep, the eq 27 normalisation next to the floor; "
+                   "the rows above it are within 2 Pa (0.05 % of rho g H) of rho g (H - z) since the kernel gradient "
+                   "is normalised to the lattice (before: 3-9 Pa high in the lower rows, the bottom row 20 Pa low, "
+                   "floor error 1.3 / 0.73 / 0.70 %). At 0.5 s it still moves with its start-up acoustic transient "
+                   "(the speed bound is meant after 5 s: the full setting).",
     "dambreak": "the experiments' fronts trail the instantly released column by a constant delay (a shift of "
                 "0.27 in T fits both Martin & Moyce series within 4 % at a/40), so the error against the raw data "
                 "does not go to zero with dx. The two modes agree within 0.8 % at a/40 (docs/isph.md, "
@@ -540,10 +542,13 @@ DIAGNOSES = {
                 "drained face is a kernel-wide zone where the drag fades (about one smoothing length "
                 "more drainage path); the small setting's tank is 2-4 particles wide, where the side walls weigh "
                 "most (walls now mirror the pressure along their faces, which took the 4-column error from 0.080 "
-                "to 0.056 at dx 5 mm; docs/biot.md, Terzaghi consolidation).",
-    "critical_gradient": "the skeleton feels 2-4 % less seepage force than i gamma_w, growing as dx falls; not the "
-                         "side walls (mirroring every wall term left it unchanged) and not yet identified "
-                         "(docs/biot.md, Critical gradient).",
+                "to 0.056 at dx 5 mm; docs/biot.md, Terzaghi consolidation). Normalising the kernel gradient to the "
+                "lattice took this setting from 0.074 / 0.060 / 0.050 to 0.069 / 0.055 / 0.045.",
+    "critical_gradient": "converging since the kernel gradient is normalised to the lattice (docs/biot.md, Critical "
+                         "gradient): before, the water's pressure force, the soil's pore term and its stress "
+                         "divergence each read 0.99 of the exact gradient in different proportions, and the "
+                         "skeleton felt 2-4 % less seepage force than i gamma_w, growing as dx fell (0.1 / 2.7 / "
+                         "3.7 %). The coarsest run is 2 columns wide.",
     "dupuit": "the discharge falls short of Dupuit's at coarse dx (q / q_Dupuit 0.87, 0.91, 1.00 at dx 0.02, "
               "0.015, 0.01 over 0.3-2 s; 0.98 at 0.005); the basin gains only ~12 particles a second at dx 0.01, "
               "so one particle more or less moves the slope by ~4 % (docs/biot.md, Rigid skeleton).",
