@@ -208,17 +208,17 @@ def test_permeameter_follows_the_falling_head_ode(run_cli, tmp_path):
 def test_freefall_coarse_volume_and_fraction_in_layer(run_cli, tmp_path):
     """The seed's free fall (configs/freefall.yaml, variant coarse: dx 2 cm, 1000 water particles,
     alpha 0.01) over its 2.5 s. Measured on the 2-core CPU:
-    - arrival at the layer bottom 0.44 s (seed 0.42 s at dx 1 cm); bound 0.3-0.6 s: a layer that does
+    - arrival at the layer bottom 0.42 s (seed 0.42 s at dx 1 cm); bound 0.3-0.6 s: a layer that does
       not drain or water that falls through it freely (0.2 m at g/eps) is far outside;
-    - fraction of the water inside the layer (0.20 <= z <= 0.40) at that moment 0.32, seed "about
+    - fraction of the water inside the layer (0.20 <= z <= 0.40) at that moment 0.34, seed "about
       eps0": bound |f - 0.3| < 0.1, the acceptance value (the layer is 10 spacings deep at 2 cm);
     - water volume measure (sum of m eps / <rho>, docs/output.md) against t = 0, averaged over the
-      last 0.25 s: +0.75 %. The single last sample scatters by about +-0.7 % around it as the pool
-      sloshes (+0.98, +1.06, +1.28 % in three runs; two threads do not repeat bit for bit), so a test
-      on it alone was flaky. Bound 1.5 %, twice the measured mean: the acceptance target is 1 %, and
-      one run's mean does not establish that it holds in every run. On
-      the way the measure dips to -6.5 % (0.52 s) while the water passes through the ground
-      (docs/freefall.md); bound 8 %, which a loss of the water entering the ground would exceed."""
+      last 0.25 s: +1.17, +1.20, +1.25 % in three runs (two threads do not repeat bit for bit; +0.75 %
+      and +1.12 % in earlier versions). The single last sample scatters by about +-0.7 % around the mean
+      as the pool sloshes, so a test on it alone was flaky. Bound 1.5 %, above that scatter; the
+      acceptance target of 1 % is not met at this resolution (docs/freefall.md). On the way the
+      measure dips to -6.8 % (0.63 s) while the water passes through the ground (docs/freefall.md);
+      bound 8 %, which a loss of the water entering the ground would exceed."""
     out = tmp_path / "ff.h5"
     r = run_cli("--config", "configs/freefall.yaml", "--variant", "coarse", "--out", out, "--no-progress")
     assert r.returncode == 0, r.stderr

@@ -19,9 +19,9 @@ U, NU, FACE, PERIOD = 0.05, 1.0e-3, 0.003, 0.01  # plate speed, viscosity, plate
 def test_stokes_first_problem(run_cli, tmp_path, mode):
     """A plate starts to slide along its face at U under water at rest (no-slip, no gravity, periodic
     along the plate): u(y, t) = U erfc(y / (2 sqrt(nu t))). Measured at dx 1 mm over the five frames to
-    0.05 s (the layer reaches 14 mm): rms error 0.0007-0.0013 U (isph), 0.0023-0.0036 U (wcsph_biot);
-    largest single-particle error 0.0035 U / 0.0098 U. Bounds: rms 0.01 U and any particle 0.02 U, ten
-    and two times the largest measured; a wall that ignored its motion leaves the water at rest, rms
+    0.05 s (the layer reaches 14 mm): rms error 0.0007-0.0021 U (isph), 0.0011-0.0028 U (wcsph_biot);
+    largest single-particle error 0.0049 U / 0.0076 U. Bounds: rms 0.01 U and any particle 0.02 U, about
+    four and three times the largest measured; a wall that ignored its motion leaves the water at rest, rms
     error ~0.4 U, and a slip plate drags nothing. The plate's particles must sit where the motion puts
     them (x0 + U t, wrapped by the period) and carry its velocity."""
     out = tmp_path / "plate.h5"
@@ -66,8 +66,8 @@ def _oscillating_plate_exact(y, t, period, n=4000):
 def test_stokes_second_problem(run_cli, tmp_path, variant):
     """The plate oscillates along its face, x = A sin(2 pi t / T) with A = U T / (2 pi) (U 0.05 m/s,
     T 0.05 s, layer sqrt(2 nu / omega) = 4 mm = 4 dx), from rest at t = 0, for two periods. Against the
-    exact start-up solution (Duhamel's integral), measured over the 20 frames: worst rms error 0.0022 U
-    (isph) and 0.0055 U (wcsph_biot), largest single-particle error 0.012 U / 0.021 U. Bounds: rms
+    exact start-up solution (Duhamel's integral), measured over the 20 frames: worst rms error 0.0019 U
+    (isph) and 0.0049 U (wcsph_biot), largest single-particle error 0.011 U / 0.021 U. Bounds: rms
     0.02 U and any particle 0.05 U (about four and two times the larger measured); a plate moving a
     quarter period out of phase leaves an rms error near 0.3 U. The plate's particles follow
     x0 + A sin(2 pi t / T) to rounding."""
