@@ -154,20 +154,12 @@ def lattice_sums(dim: int, support_factor: float = SUPPORT_FACTOR) -> dict:
     free-surface thresholds consistent with the discrete lattice.
     """
     h = support_factor / 2.0
-    n = int(math.ceil(support_factor)) + 1
-    rng = np.arange(-n, n + 1, dtype=float)
-    grids = np.meshgrid(*([rng] * dim), indexing="ij")
-    pts = np.stack([g.ravel() for g in grids], axis=1)
-    r = np.linalg.norm(pts, axis=1)
-    inside = r < support_factor
-    count = int(inside.sum()) - 1
-    s = float(w_np(r[inside], h, dim).sum())
-    rr = r[inside & (r > 0)]
-    p = pts[inside & (r > 0)]
+    p = _lattice_points(dim, support_factor)
+    r = np.linalg.norm(p, axis=1)
+    s = float(w_np(np.zeros(1), h, dim)[0] + w_np(r, h, dim).sum())
     # x_i = 0, rij = -p; grad_i W = dW/dr * rij / r ; moment = sum (x_j - x_i)_0 * gradW_0
-    grad0 = dw_dr_np(rr, h, dim) * (-p[:, 0]) / rr
-    g = float((p[:, 0] * grad0).sum())
-    return {"neighbours": count, "kernel_sum": s, "gradient_moment": g}
+    g = float(np.sum(p[:, 0] * dw_dr_np(r, h, dim) * (-p[:, 0]) / r))
+    return {"neighbours": len(p), "kernel_sum": s, "gradient_moment": g}
 
 
 def lattice_kernel_sum(dim: int, spacing: float, support_factor: float = SUPPORT_FACTOR) -> tuple[float, int]:
