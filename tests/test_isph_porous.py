@@ -220,7 +220,7 @@ def test_freefall_coarse_volume_and_fraction_in_layer(run_cli, tmp_path):
       dt 2 ms the mean is +1.2 %: the eq 31 stabilisation acts per step, docs/freefall.md, "Time
       step"). On the way the measure dips to -4.4..-5.7 % (0.4-0.64 s) while the water passes through
       the ground (docs/freefall.md); bound 8 %, which a loss of the water entering the ground would
-      exceed.
+      exceed."""
     out = tmp_path / "ff.h5"
     r = run_cli("--config", "configs/freefall.yaml", "--variant", "coarse", "--out", out, "--no-progress")
     assert r.returncode == 0, r.stderr
