@@ -366,8 +366,10 @@ class WCSPHSolver(SoilStep, SolverCommon):
         (eq 25 in volume form; walls with the virtual velocity of eq 50-51), rho^{n+1} = rho^n (1 - D_i dt)
         (eq 48), h^{n+1} = h^n (1 + D_i dt / d) (eq 52), the XSPH correction (eq 53) and, when `normalise`,
         eq 27 applied to rho^n first: rho_i = sum_{j in a} m_j W_ij / sum_{j in a} (m_j / rho_j) W_ij over
-        the material a of i (self included). Then the equations of state (eq 39-41). Reads the view s,
-        writes the view q and the particle's own fields."""
+        the material a of i (self included) and the wall particles, each standing for i's material at
+        rho_w = rho_i (1 + g . d_n / c_i^2) (hydrostatic across the wall, d_n the normal part of x_w - x_i,
+        volume dx^d). Then the equations of state (eq 39-41). Reads the view s, writes the view q and the
+        particle's own fields."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.fmask[i] == 1:
@@ -381,10 +383,12 @@ class WCSPHSolver(SoilStep, SolverCommon):
                     hi = si[self.S_H]
                 num = 0.0
                 den = 0.0
+                c2i = 0.0
                 if ti.static(normalise):
                     w0 = kernels.w(0.0, hi, self.dim)
                     num = si[self.S_M] * w0
                     den = si[self.S_M] / rhoi * w0
+                    c2i = self._sound_speed(ki, rhoi) ** 2
                 div = 0.0
                 xs = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
@@ -408,6 +412,13 @@ class WCSPHSolver(SoilStep, SolverCommon):
                         beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
                         vij = terms.boundary_relative_velocity(vi - self._vel(sj), nrm, beta, self.no_slip)
                         div -= self.vol0 * vij.dot(gw)
+                        if ti.static(normalise):
+                            # the wall's mirror image of i's water, hydrostatic across the wall: without it
+                            # eq 27 averages the row next to a floor with the rows above only (lighter)
+                            dxn = (-rij).dot(nrm) * nrm
+                            rho_w = rhoi * (1.0 + self.g.dot(dxn) / c2i)
+                            num += rho_w * self.vol0 * wij
+                            den += self.vol0 * wij
                     else:
                         vij = vi - self._vel(sj)
                         mj = sj[self.S_M]
