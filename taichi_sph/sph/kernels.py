@@ -84,6 +84,7 @@ def _raw_gradient_moment(dim: int, support_factor: float = SUPPORT_FACTOR) -> fl
     p = _lattice_points(dim, support_factor)
     r = np.linalg.norm(p, axis=1)
     dwdr = sigma(dim, h) / h * _dw_dq_shape_np(r / h)
+    # x_i = 0, rij = -p; grad_i W = dW/dr * rij / r; moment = sum (x_j - x_i)_0 * grad_i W_0
     return float(np.sum(p[:, 0] * dwdr * (-p[:, 0]) / r))
 
 
@@ -157,8 +158,7 @@ def lattice_sums(dim: int, support_factor: float = SUPPORT_FACTOR) -> dict:
     p = _lattice_points(dim, support_factor)
     r = np.linalg.norm(p, axis=1)
     s = float(w_np(np.zeros(1), h, dim)[0] + w_np(r, h, dim).sum())
-    # x_i = 0, rij = -p; grad_i W = dW/dr * rij / r ; moment = sum (x_j - x_i)_0 * gradW_0
-    g = float(np.sum(p[:, 0] * dw_dr_np(r, h, dim) * (-p[:, 0]) / r))
+    g = _raw_gradient_moment(dim, support_factor) * GRADIENT_SCALE[dim]
     return {"neighbours": len(p), "kernel_sum": s, "gradient_moment": g}
 
 

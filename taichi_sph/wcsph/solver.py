@@ -413,8 +413,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
                         vij = terms.boundary_relative_velocity(vi - self._vel(sj), nrm, beta, self.no_slip)
                         div -= self.vol0 * vij.dot(gw)
                         if ti.static(normalise):
-                            # the wall's mirror image of i's water, hydrostatic across the wall: without it
-                            # eq 27 averages the row next to a floor with the rows above only (lighter)
+                            # the wall's mirror image of i's material, hydrostatic across the wall: without
+                            # it eq 27 averages the row next to a floor with the rows above only (lighter)
                             dxn = (-rij).dot(nrm) * nrm
                             rho_w = rhoi * (1.0 + self.g.dot(dxn) / c2i)
                             num += rho_w * self.vol0 * wij
