@@ -264,12 +264,23 @@ class ISPHSolver(SolverCommon):
                 if ti.static(self.porous and self.shifting):
                     if self.eps[i] < 1.0:
                         w_ref = kernels.w(self.dx * self.eps[i] ** (-1.0 / self.dim), self.h, self.dim)
+                # eq 34's count in the ground is held against N_surf N(eps_i) / N(1) (below): a wall
+                # particle counts as the same fraction of a neighbour, so that walls filling half the
+                # support count half the threshold's lattice. Counted as eps_i (0.8 against N(0.8) /
+                # N(1) = 32 / 56 in 3D, where a lattice shell has left the support) the walls alone
+                # held a lone particle in a corner above the threshold, and its pressure row, with
+                # one water neighbour against 34 walls, gave it pressures of 100 kPa
+                wall_count = 1.0
+                if ti.static(self.porous):
+                    if self.eps[i] < 1.0:
+                        wall_count = self._table_at(self.nsurf_tab, self.eps[i]) / self.n_surf
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     if not self._present(j):
                         continue
                     # a wall particle stands for water of mass eps_i m at the wall lattice: volume dx^d
                     share = self.eps[i]
+                    count = wall_count
                     vj = self.mass / self.rho_w
                     if self.kind[j] == WATER:
                         n_water += 1
@@ -278,8 +289,9 @@ class ISPHSolver(SolverCommon):
                         # measure how full the support is, not how many particles it holds (identical
                         # to counting particles where eps is uniform)
                         share = self.eps[i] / self.eps[j]
+                        count = share
                         vj = self.mass / (self.eps[j] * self.rho_w)
-                    nb += share
+                    nb += count
                     rij = operators.rel(xi, self.x[j], self.period)
                     r = rij.norm()
                     wsum += share * kernels.w(r, self.h, self.dim)
