@@ -8,7 +8,8 @@ particle reaches the bottom of the layer (interpolated between frames; the seed 
 about eps0); the water volume measure (sum of m eps / <rho>, docs/output.md) against t = 0 at
 arrival, its lowest and highest value over the run and its mean over the last 0.25 s (the last
 sample alone scatters with the sloshing pool); the water still inside the layer at the end; the
-bottom pressure at the end against hydrostatic; the wall time of the run.
+bottom pressure at the end against hydrostatic, and the pool's vertical pressure gradient against
+rho_w g; the wall time of the run.
 
 Bottom pressure: the mean pressure of the bottom row of water particles (centres within half a
 spacing of the lowest) against the mean of rho_w g (s - z), with the pool's surface s taken as the
@@ -60,6 +61,11 @@ def analyse(path):
         surface = np.percentile(pos[pool, -1], 99) + 0.5 * rf.dx if pool.any() else None
         bottom = pos[:, -1] < pos[:, -1].min() + 0.5 * rf.dx
         p_bottom = float(np.mean(p[bottom]))
+        # the pool's pressure gradient: least-squares slope of P against height over the water below
+        # the layer, against rho_w g (a hydrostatic pool gives 1, whatever its surface)
+        slope = None
+        if pool.sum() > 2:
+            slope = float(-np.polyfit(pos[pool, -1], p[pool], 1)[0] / (rho_w * g))
         p_hydro = float(np.mean(rho_w * g * (surface - pos[bottom, -1]))) if surface is not None else None
         return {
             "run": str(path), "dx": rf.dx, "dt": float(cfg["dt"]), "eps0": region["eps0"],
@@ -69,7 +75,7 @@ def analyse(path):
             "drift_max": float(vol.max()), "t_max": float(t[np.argmax(vol)]),
             "drift_end": float(vol[settled].mean()), "end_time": float(times[-1]),
             "in_layer_end": float(frac[-1]),
-            "bottom_pressure_Pa": p_bottom, "hydrostatic_Pa": p_hydro,
+            "bottom_pressure_Pa": p_bottom, "hydrostatic_Pa": p_hydro, "pool_gradient": slope,
             "wall_s": float(np.sum(d["wall_seconds"])) if "wall_seconds" in d else None,
         }
 
@@ -84,12 +90,12 @@ def row(r):
             f"{fmt(r['arrival_s'], '.3f')} ({fmt(seed, 'g')}) | {fmt(r['fraction_in_layer'], '.3f')} | "
             f"{fmt(r['drift_at_arrival'], '+.1%')} | {r['drift_min']:+.1%} ({r['t_min']:.2f} s) | "
             f"{r['drift_max']:+.1%} ({r['t_max']:.2f} s) | {r['drift_end']:+.1%} | "
-            f"{r['in_layer_end']:.1%} | {pressure} | {fmt(r['wall_s'], '.0f')} |")
+            f"{r['in_layer_end']:.1%} | {pressure} | {fmt(r['pool_gradient'], '.3f')} | {fmt(r['wall_s'], '.0f')} |")
 
 
 HEADER = ("| dx (m) | dt | eps0 | alpha | arrival (s) (seed) | water in layer at arrival | volume at arrival | "
           "volume lowest (t) | volume highest (t) | volume at end | in layer at end | "
-          "bottom pressure vs hydrostatic | wall time (s) |")
+          "bottom pressure vs hydrostatic | pool dP/dz / (rho_w g) | wall time (s) |")
 
 
 def main(paths):

@@ -558,10 +558,10 @@ DIAGNOSES = {
                 "within dx/2 of the layer bottom, frames every 0.01 s) and the fraction in the layer move by "
                 "O(dx) from one resolution to the next; the full setting runs 2, 1.43 and 1 cm for all three "
                 "eps0. Volume drift over 0.6 s only (the target is over 2.5 s; the measure sum m/<rho> dips "
-                "while water is inside the layer and recovers, docs/freefall.md). Both alpha values arrive "
-                "earlier as dx falls (alpha 0.01: 0.48, 0.48, 0.43 s; alpha 0: 0.53, 0.46, 0.40 s) towards "
-                "the seed's 0.34 s; at 1 cm the eps0 0.5 case still arrives at 0.44 s (docs/freefall.md), "
-                "which is not explained yet.",
+                "while water is inside the layer and recovers, docs/freefall.md). The arrival moves by O(dx), not "
+                "monotonically (alpha 0.01: 0.38, 0.47, 0.42 s; alpha 0: 0.39, 0.43, 0.42 s at dx 4, 2.86, 2 cm); "
+                "at the seed's 1 cm over 2.5 s docs/freefall.md has 0.396 s (alpha 0.01) and 0.363 s (alpha 0) "
+                "against the seed's 0.34 s, whose geometry (its figure 5 is not in the text) is our reading.",
 }
 
 
