@@ -24,8 +24,7 @@ import numpy as np
 import yaml
 
 from taichi_sph.io.hdf5 import RunFile
-
-SEED_ARRIVAL = {0.3: 0.42, 0.5: 0.34, 0.8: 0.26}
+from validate import FREEFALL_ARRIVAL  # the seed's arrival times (tools/ is this script's folder)
 
 
 def analyse(path):
@@ -73,7 +72,7 @@ def analyse(path):
             "arrival_s": arrival, "fraction_in_layer": frac_at, "drift_at_arrival": drift_arrival,
             "drift_min": float(vol.min()), "t_min": float(t[np.argmin(vol)]),
             "drift_max": float(vol.max()), "t_max": float(t[np.argmax(vol)]),
-            "drift_end": float(vol[settled].mean()), "end_time": float(times[-1]),
+            "drift_end": float(vol[settled].mean()),
             "in_layer_end": float(frac[-1]),
             "bottom_pressure_Pa": p_bottom, "hydrostatic_Pa": p_hydro, "pool_gradient": slope,
             "wall_s": float(np.sum(d["wall_seconds"])) if "wall_seconds" in d else None,
@@ -82,7 +81,7 @@ def analyse(path):
 
 def row(r):
     fmt = lambda v, f: "-" if v is None else format(v, f)
-    seed = SEED_ARRIVAL.get(round(float(r["eps0"]), 2))
+    seed = FREEFALL_ARRIVAL.get(round(float(r["eps0"]), 2))
     pressure = "-" if r["hydrostatic_Pa"] is None else (
         f"{r['bottom_pressure_Pa']:.0f} / {r['hydrostatic_Pa']:.0f} Pa, "
         f"{r['bottom_pressure_Pa'] / r['hydrostatic_Pa'] - 1:+.1%}")
