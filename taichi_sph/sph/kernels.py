@@ -168,9 +168,5 @@ def lattice_kernel_sum(dim: int, spacing: float, support_factor: float = SUPPORT
     everywhere). s = 1 gives lattice_sums' values; s > 1 is water spread through ground of porosity
     eps = s^-d."""
     h = support_factor / 2.0
-    n = int(math.ceil(support_factor / spacing)) + 1
-    rng = np.arange(-n, n + 1, dtype=float) * spacing
-    grids = np.meshgrid(*([rng] * dim), indexing="ij")
-    r = np.linalg.norm(np.stack([g.ravel() for g in grids], axis=1), axis=1)
-    r = r[r < support_factor]
-    return float(w_np(r, h, dim).sum() * spacing**dim), int(len(r) - 1)
+    r = np.linalg.norm(_lattice_points(dim, support_factor / spacing), axis=1) * spacing
+    return float((w_np(np.zeros(1), h, dim)[0] + w_np(r, h, dim).sum()) * spacing**dim), len(r)
