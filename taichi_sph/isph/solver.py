@@ -264,16 +264,21 @@ class ISPHSolver(SolverCommon):
                 if ti.static(self.porous and self.shifting):
                     if self.eps[i] < 1.0:
                         w_ref = kernels.w(self.dx * self.eps[i] ** (-1.0 / self.dim), self.h, self.dim)
-                # eq 34's count in the ground is held against N_surf N(eps_i) / N(1) (below): a wall
-                # particle counts as the same fraction of a neighbour, so that walls filling half the
-                # support count half the threshold's lattice. Counted as eps_i (0.8 against N(0.8) /
-                # N(1) = 32 / 56 in 3D, where a lattice shell has left the support) the walls alone
-                # held a lone particle in a corner above the threshold, and its pressure row, with
-                # one water neighbour against 34 walls, gave it pressures of 100 kPa
+                # eq 34 counts eps N_surf; a pore lattice holds fewer neighbours than eps N_full
+                # (2D, eps = 0.3: 4 within r_e, below 0.3 x 17 = 5.1, so every particle would be
+                # free): the threshold scales with the pore lattice's own count instead
+                n_surf = self.eps[i] * self.n_surf
+                # a wall particle counts as the same fraction N(eps_i) / N(1) of a neighbour, so that
+                # walls filling half the support count half the threshold's lattice. Counted as eps_i
+                # (0.8 against N(0.8) / N(1) = 32 / 56 in 3D, where a lattice shell has left the
+                # support) the walls alone held a lone particle in a corner above the threshold, and
+                # its pressure row, with one water neighbour against 34 walls, gave it 100 kPa
                 wall_count = 1.0
                 if ti.static(self.porous):
                     if self.eps[i] < 1.0:
-                        wall_count = self._table_at(self.nsurf_tab, self.eps[i]) / self.n_surf
+                        n_surf = self._table_at(self.nsurf_tab, self.eps[i])
+                        if ti.static(self.n_surf > 0):
+                            wall_count = n_surf / self.n_surf
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     if not self._present(j):
@@ -309,13 +314,6 @@ class ISPHSolver(SolverCommon):
                 if ti.static(self.shifting):
                     self.grad_c[i] = gc
                 is_free = 0
-                n_surf = self.eps[i] * self.n_surf
-                if ti.static(self.porous):
-                    # eq 34 counts eps N_surf; a pore lattice holds fewer neighbours than eps N_full
-                    # (2D, eps = 0.3: 4 within r_e, below 0.3 x 17 = 5.1, so every particle would be
-                    # free): the threshold scales with the pore lattice's own count instead
-                    if self.eps[i] < 1.0:
-                        n_surf = self._table_at(self.nsurf_tab, self.eps[i])
                 if nb < n_surf or n_water == 0:
                     is_free = 1
                     # free water: a count below N_surf with a full number density is a particle
