@@ -119,6 +119,9 @@ class ISPHSolver(SolverCommon):
         self.dirichlet_rows = ti.field(ti.i32, ())
         self.vtmp = ti.Vector.field(dim, float, n)
         self.grad_c = ti.Vector.field(dim, float, n)
+        #: pressure gradient of a water particle next to a wall, from its water neighbours (corrected
+        #: eq 12): the wall pressure's variation along the wall face (_k_wall_pressure)
+        self.grad_p_water = ti.Vector.field(dim, float, n)
         self.wall_acc = ti.field(float, n)
         self.wall_wsum = ti.field(float, n)
         self.wet = ti.field(ti.i32, n)
@@ -561,10 +564,40 @@ class ISPHSolver(SolverCommon):
                 psol[self.row[i]] = ti.cast(self.p[i], psol.dtype)
 
     @ti.kernel
+    def _k_water_gradient(self):
+        """grad P of each water particle that has a wall neighbour, from its water neighbours only (eq 12
+        difference form, corrected by their own moment matrix where it is invertible): what the wall
+        pressure takes along the wall's face."""
+        for i in range(self.n):
+            if self.solve_mask[i] == 1:
+                xi = self.x[i]
+                pi = self.p[i]
+                near_wall = 0
+                M = ti.Matrix.zero(float, self.dim, self.dim)
+                s = ti.Vector.zero(float, self.dim)
+                for k in range(self.grid.nbr_count[i]):
+                    j = self.grid.nbr[i, k]
+                    if self.kind[j] == WALL:
+                        near_wall = 1
+                    elif self.solve_mask[j] == 1:
+                        rij = operators.rel(xi, self.x[j], self.period)
+                        r = rij.norm()
+                        if r > 0.0:
+                            gw = kernels.grad_w(rij, r, self.h, self.dim)
+                            vj = self.mass / (self.eps[j] * self.rho_w)
+                            M += vj * (-rij).outer_product(gw)
+                            s += vj * (self.p[j] - pi) * gw
+                if near_wall == 1:
+                    if M.determinant() > 0.1:
+                        s = M.inverse() @ s
+                    self.grad_p_water[i] = s
+
+    @ti.kernel
     def _k_wall_pressure(self):
-        """Wall pressure interpolated from the solved fluid pressure with hydrostatic correction
-        (Adami et al. 2012 form, the virtual-marker idea of the seed): P_w = sum_f W_wf (P_f +
-        rho_w g . (x_w - x_f)) / sum_f W_wf, accumulated from the fluid side of each pair."""
+        """Wall pressure interpolated from the solved fluid pressure (Adami et al. 2012 form, the
+        virtual-marker idea of the seed): P_w = sum_f W_wf P_w(f) / sum_f W_wf, P_w(f) the value seen
+        from fluid particle f (operators.wall_pressure_along_face: hydrostatic across the wall, the
+        fluid's own gradient along it), accumulated from the fluid side of each pair."""
         for i in range(self.n):
             if self.kind[i] == WALL:
                 self.wall_acc[i] = 0.0
@@ -577,10 +610,11 @@ class ISPHSolver(SolverCommon):
                     if not self._present(j):
                         continue
                     if self.kind[j] == WALL:
-                        r = operators.rel(xi, self.x[j], self.period).norm()
-                        wij = kernels.w(r, self.h, self.dim)
-                        ti.atomic_add(self.wall_acc[j], wij * operators.wall_pressure(self.p[i], self.rho_w, self.g,
-                                                                                   xi - operators.rel(xi, self.x[j], self.period), xi))
+                        d = -operators.rel(xi, self.x[j], self.period)
+                        wij = kernels.w(d.norm(), self.h, self.dim)
+                        pw = operators.wall_pressure_along_face(self.p[i], self.rho_w, self.g, self.grad_p_water[i],
+                                                                self.normal[j], d)
+                        ti.atomic_add(self.wall_acc[j], wij * pw)
                         ti.atomic_add(self.wall_wsum[j], wij)
         for i in range(self.n):
             if self.kind[i] == WALL:
@@ -591,9 +625,16 @@ class ISPHSolver(SolverCommon):
 
     @ti.kernel
     def _k_corrector(self):
-        """v = v* - k grad P (eq 20), gradient by eq 12 (optionally corrected) or eq 13. In the eq 12
-        forms gravity is taken out as in the PPE: v = v*_rest - k grad(P - phi), phi = rho_w g . x, so
-        that a hydrostatic P gives v = 0 exactly whatever the particle arrangement."""
+        """v = v* - k grad P (eq 20), gradient by eq 12 (optionally corrected) or eq 13.
+
+        The gradient is the operator's own gradient of P: gravity (in v*) is balanced only by the
+        pressure differences a particle's neighbours carry. The PPE is solved for P - phi (phi =
+        rho_w g . x, see _assemble), but the corrector does not take phi's gradient out as the exact
+        rho_w g: that would credit every particle with a hydrostatic pressure field across the part of
+        its support that holds no water, and a particle with no water neighbour (spray, a droplet
+        leaving a splash) hung in the air (docs/isph.md, "Gravity on every particle"). With the
+        kernel-gradient correction (L_i = M_i^-1) the operator is exact for the linear hydrostatic P, so
+        water at rest still gets v = 0 to round-off wherever L_i exists."""
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 xi = self.x[i]
@@ -615,18 +656,17 @@ class ISPHSolver(SolverCommon):
                             rb_j = self.eps[j] * self.rho_w
                             m_j = self.mass
                         if ti.static(self.grad_mode == GRAD_SYMMETRIC):
+                            # eq 13 measured from the free surface's pressure p_s: the form is exact for a
+                            # constant only on a full support, so with P itself a drop (every particle at
+                            # p_s) pushed itself apart and a particle beside a wall was pushed off it
                             gp += m_j * (pj / (rb_j * rb_j) + pi / (rb_i * rb_i)) * gw
                         else:
-                            # P - phi: the hydrostatic part cancels pair by pair
-                            gp += m_j / rb_j * ((pj - pi) - self.rho_w * self.g.dot(-rij)) * gw
-                vrest = self.vstar[i]
+                            gp += m_j / rb_j * (pj - pi) * gw
                 if ti.static(self.grad_mode == GRAD_SYMMETRIC):
                     gp *= rb_i
-                else:
-                    vrest -= self.kcoef[i] * self.rho_w * self.g
                 if ti.static(self.grad_mode == GRAD_CORRECTED):
                     gp = self.L[i] @ gp
-                self.v[i] = vrest - self.kcoef[i] * gp
+                self.v[i] = self.vstar[i] - self.kcoef[i] * gp
 
     @ti.kernel
     def _k_collision(self):
@@ -805,6 +845,7 @@ class ISPHSolver(SolverCommon):
         if not self.ppe_ell:
             self.psol.from_numpy(sol.astype(self.np_fp))
         self._k_scatter_pressure(self.psol)
+        self._k_water_gradient()
         self._k_wall_pressure()
         self._k_corrector()
         collisions = 0

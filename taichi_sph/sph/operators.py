@@ -57,6 +57,18 @@ def wall_pressure(p_i, rho_w, g, x_w, x_i):
 
 
 @ti.func
+def wall_pressure_along_face(p_i, rho_w, g, grad_t, n_w, d):
+    """Wall pressure seen from fluid particle i, d = x_w - x_i, n_w the wall's unit normal (mirror-point
+    idea of the seed's virtual markers): the hydrostatic Neumann condition dP/dn = rho_w g . n across
+    the wall, and along its face the fluid's own pressure gradient grad_t (not gravity's):
+    P_w = P_i + rho_w (g . n_w)(n_w . d) + grad_t . (d - (n_w . d) n_w). Water at rest has grad_t =
+    rho_w g, and this is P_i + rho_w g . d; a drop sliding down a wall has grad_t ~ 0, and the wall
+    carries no hydrostatic pressure that would hold it up."""
+    dn = n_w.dot(d)
+    return p_i + rho_w * g.dot(n_w) * dn + grad_t.dot(d - dn * n_w)
+
+
+@ti.func
 def rel(xi, xj, period: ti.template()):
     """Pair displacement x_i - x_j, by the minimum image along periodic axes. `period` holds the period L
     of each axis, 0.0 where the axis is not periodic (a Python tuple: the wrap compiles only for the
