@@ -229,6 +229,15 @@ def run_file_overview(rf, summary: dict) -> dict:
         except (TypeError, ValueError):
             pass
     out["timings"] = timings
+    diag = rf.diagnostics()
+    if "isolated" in diag and diag["isolated"].size:
+        # water particles with no water neighbour within the support (spray, lone drops), per step
+        import numpy as np
+
+        iso = diag["isolated"].astype(np.int64)
+        n_water = int(np.count_nonzero(rf.kind == 0))
+        out["isolated_water"] = {"last": int(iso[-1]), "max": int(iso.max()), "mean": float(iso.mean()),
+                                 "max_fraction_of_water": float(iso.max()) / max(n_water, 1)}
     return out
 
 

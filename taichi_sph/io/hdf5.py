@@ -70,6 +70,7 @@ UNITS: dict[str, str] = {
     "kind": "1",
     "id": "1",
     "free_surface": "1",
+    "isolated": "1",
     "stress": "Pa",
     "effective_stress": "Pa",
     "deviatoric_stress": "Pa",
