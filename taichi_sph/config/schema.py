@@ -9,6 +9,7 @@ walls are built outside it. Validation runs before any Taichi kernel is compiled
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Literal, Optional, Union
 
@@ -428,12 +429,20 @@ class WCSPHSoil(Strict):
     stress_floor: PosFloat = 1000.0
     #: Poisson's ratio nu (seed: 0.3)
     poisson: Annotated[float, Field(gt=0, lt=0.5)] = 0.3
-    #: tan(phi), phi the friction angle at failure: tau_f = p tan(phi) + cohesion (seed: 0.5)
-    tan_phi: NonNegFloat = 0.5
-    #: cohesion c (Pa) (seed: none)
+    #: Mohr-Coulomb friction angle phi (degrees): failure where the in-plane Mohr circle's radius reaches
+    #: p sin(phi) + c cos(phi), p the in-plane mean effective stress (2D, plane strain); in 3D the
+    #: Drucker-Prager cone sqrt(J2) = p sin(phi) + c cos(phi) that matches Mohr-Coulomb in plane strain
+    #: (docs/biot.md). Give this or `tan_phi`, not both; default the seed's tan_phi = 0.5, i.e. 30 deg
+    friction_angle: Annotated[float, Field(ge=0, lt=90)] | None = None
+    #: the seed's form tau_f = p tan_phi on the Mohr circle's radius (seed 002 section 2.4 (2)), which is
+    #: Mohr-Coulomb with sin(phi) = tan_phi: mapped to friction_angle = asin(tan_phi) (0.5 -> 30 deg, not
+    #: atan(0.5) = 26.6 deg); at most 1. Give this or `friction_angle`, not both
+    tan_phi: NonNegFloat | None = None
+    #: Mohr-Coulomb cohesion c (Pa) (seed: none)
     cohesion: NonNegFloat = 0.0
     #: largest mean tension the soil carries (Pa, >= 0); beyond it the stress is set to zero (tension
-    #: cut-off). Default: the tension at which tau_f vanishes, cohesion / tan(phi) (0 without cohesion)
+    #: cut-off). Default: the tension at which the failure shear stress vanishes, c / tan(phi) (0 without
+    #: cohesion)
     tension_cutoff: NonNegFloat | None = None
     #: initial ratio of horizontal to vertical effective stress K0; default nu / (1 - nu) (elastic, at rest)
     k0: PosFloat | None = None
@@ -452,6 +461,18 @@ class WCSPHSoil(Strict):
     #: hold the soil particles where they are (a rigid porous skeleton: water seeps through it, the soil
     #: neither moves nor limits the time step); for steady-seepage checks
     fixed: bool = False
+
+    def friction_angle_deg(self) -> float:
+        """Mohr-Coulomb friction angle (degrees): `friction_angle`, or asin(tan_phi) (seed default 0.5)."""
+        if self.friction_angle is not None:
+            return self.friction_angle
+        return math.degrees(math.asin(min(0.5 if self.tan_phi is None else self.tan_phi, 1.0)))
+
+    def constrained_modulus(self, dim: int) -> float:
+        """Constrained (oedometric) modulus M = E0 (1 - nu) / ((1 + nu) (1 - 2 nu)) at the reference stress
+        (Pa); in 2D the plane-strain P-wave modulus lambda + 2 G, which has the same value."""
+        nu = self.poisson
+        return self.youngs_modulus * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu))
 
 
 class InflowSource(Box):
@@ -939,8 +960,15 @@ def _check_soil_blocks(cfg: "Config") -> None:
     soil = cfg.wcsph.soil
     if soil.start_from is not None and not Path(soil.start_from.run).is_file():
         _fail("wcsph.soil.start_from.run", f"no run file '{soil.start_from.run}'")
-    if soil.tension_cutoff is not None and soil.tan_phi > 0 and soil.tension_cutoff > soil.cohesion / soil.tan_phi:
-        _fail("wcsph.soil.tension_cutoff", f"must not exceed cohesion / tan_phi = {soil.cohesion / soil.tan_phi:g} Pa "
+    if soil.friction_angle is not None and soil.tan_phi is not None:
+        _fail("wcsph.soil.tan_phi", "give either friction_angle (Mohr-Coulomb, degrees) or tan_phi (the seed's "
+              "form, sin(phi) = tan_phi), not both")
+    if soil.tan_phi is not None and soil.tan_phi > 1.0:
+        _fail("wcsph.soil.tan_phi", f"{soil.tan_phi:g} exceeds 1: the seed's tau_f = p tan_phi is Mohr-Coulomb with "
+              "sin(phi) = tan_phi, which has no angle above 1 (give friction_angle in degrees)")
+    tan_mc = math.tan(math.radians(soil.friction_angle_deg()))
+    if soil.tension_cutoff is not None and tan_mc > 0 and soil.tension_cutoff > soil.cohesion / tan_mc:
+        _fail("wcsph.soil.tension_cutoff", f"must not exceed cohesion / tan(phi) = {soil.cohesion / tan_mc:g} Pa "
               "(beyond it the failure shear stress would be negative)")
 
 

@@ -46,12 +46,14 @@ class SoilStep:
         self.nu_s = sp.poisson
         self.k_fac = soil.bulk_modulus_factor(cfg.dim, sp.poisson)
         self.m_fac = soil.p_wave_factor(cfg.dim, sp.poisson)
-        self.tan_phi = sp.tan_phi
-        self.coh_s = sp.cohesion
+        # yield surface tau_f = p sin(phi) + c cos(phi) (soil.py; `tan_phi` given: sin(phi) = tan_phi)
+        self.phi_deg = sp.friction_angle_deg()
+        self.sin_phi, self.c_cos = soil.yield_constants(self.phi_deg, sp.cohesion)
         if sp.tension_cutoff is not None:
             self.t_cut = sp.tension_cutoff
-        else:
-            self.t_cut = sp.cohesion / sp.tan_phi if sp.tan_phi > 0 else 0.0
+        else:  # where tau_f vanishes: p = -c cot(phi)
+            tan_mc = math.tan(math.radians(self.phi_deg))
+            self.t_cut = sp.cohesion / tan_mc if tan_mc > 0 else 0.0
         self.alpha_s = sp.alpha
         self.g_over_k = self.g_abs / sp.permeability
         self.damping = sp.damping
@@ -137,7 +139,7 @@ class SoilStep:
                         L -= self.vol0 * vij.outer_product(gw)
                 rho = rhoi * (1.0 - L.trace() * dt)
                 sig, dgam, _e = soil.stress_update(self.sig[i], L, dt, self.e0, self.p_ref, self.m_exp, self.p_floor,
-                                                   self.nu_s, self.k_fac, self.tan_phi, self.coh_s, self.t_cut,
+                                                   self.nu_s, self.k_fac, self.sin_phi, self.c_cos, self.t_cut,
                                                    self.dim)
                 self.sig[i] = sig
                 self.eps_p[i] += dgam
