@@ -203,11 +203,12 @@ def test_infinite_slope_slides_above_the_non_dilatant_angle(run_cli, tmp_path, p
 
 
 def test_dry_column_collapse(run_cli, tmp_path):
-    """configs/column_collapse.yaml at dx = a/10 and a/20 (0.6 s): tan(phi) = 0.5, phi = 26.6 deg.
+    """configs/column_collapse.yaml at dx = a/10 and a/20 (0.6 s): the seed's tan(phi) = 0.5, Mohr-Coulomb
+    phi = 30 deg, non-dilatant sliding angle phi* = atan(sin phi) = 26.6 deg (docs/biot.md), the bound's phi.
     Measured: slopes 13.6 / 17.4 deg, run-outs 0.166 / 0.156 m (6 % apart), the deposit at rest (median
     speed < 1 mm/s). Bounds: slope <= phi + 5 deg, run-out > 0, the two within 15 % (acceptance numbers),
     median speed < 1 cm/s (still flowing would be > 0.1 m/s)."""
-    phi = np.degrees(np.arctan(0.5))
+    phi = np.degrees(np.arctan(math.sin(math.radians(30.0))))  # phi*, Davis's angle at psi = 0
     results = []
     for variant in ([], ["--variant", "fine"]):
         out = tmp_path / f"c{len(variant)}.h5"
