@@ -130,8 +130,8 @@ def test_yield_is_mohr_coulomb_in_plane_strain(ti_cpu, dim, keys, phi, coh):
     ~1. Measured: |sigma_1 / (N sigma_3 + 2 c sqrt(N)) - 1| below 1e-14 in 2D and 3D (in 3D s_zz decays
     geometrically with the plastic strain and has vanished; sigma_zz = 11.0 kPa, the mean); bound 1e-6
     (rounding of 10^4 steps, and a residue of s_zz that a shorter run would leave)."""
-    cfg = load_config(data={"mode": "wcsph_biot", "dim": dim, "dx": 0.01, "end_time": 0.1, "tank": {"size": [0.1] * dim},
-                            "soil_blocks": [{"min": [0.0] * dim, "max": [0.05] * dim}],
+    cfg = load_config(data={"mode": "wcsph_biot", "dim": dim, "dx": 0.01, "end_time": 0.1,
+                            "tank": {"size": [0.1] * dim}, "soil_blocks": [{"min": [0.0] * dim, "max": [0.05] * dim}],
                             "wcsph": {"soil": keys}})
     sp = cfg.wcsph.soil
     assert sp.friction_angle_deg() == pytest.approx(phi, abs=1e-12)
