@@ -468,11 +468,12 @@ class WCSPHSoil(Strict):
             return self.friction_angle
         return math.degrees(math.asin(min(0.5 if self.tan_phi is None else self.tan_phi, 1.0)))
 
-    def constrained_modulus(self, dim: int) -> float:
-        """Constrained (oedometric) modulus M = E0 (1 - nu) / ((1 + nu) (1 - 2 nu)) at the reference stress
-        (Pa); in 2D the plane-strain P-wave modulus lambda + 2 G, which has the same value."""
+    def constrained_modulus(self, p: float) -> float:
+        """Constrained (oedometric) modulus M = E (1 - nu) / ((1 + nu) (1 - 2 nu)) at mean effective stress p
+        (Pa), E of eq 42 (with the floor); in 2D the plane-strain P-wave modulus lambda + 2 G, the same value."""
         nu = self.poisson
-        return self.youngs_modulus * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu))
+        e = self.youngs_modulus * (max(p, self.stress_floor) / self.reference_stress) ** self.exponent
+        return e * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu))
 
 
 class InflowSource(Box):
@@ -689,11 +690,36 @@ class Config(Strict):
                   + [blk.bounds(self.dim, self.tank.size)[1][-1] for blk in self.soil_blocks])
         return max((2.0 * g * top) ** 0.5, 1.0e-3)
 
+    def soil_modulus(self) -> float | None:
+        """Constrained modulus M of the soil (Pa) at the largest vertical effective stress of the scene, the
+        dry weight of the highest soil top, (1 - n) rho_s |g| top (an upper bound of M where E grows with
+        p); None without soil or with a rigid skeleton (`wcsph.soil.fixed`), which stores no water."""
+        sp = self.wcsph.soil
+        if self.mode != "wcsph_biot" or not self.soil_blocks or not self.water or sp.fixed:
+            return None
+        g = sum(c * c for c in self.gravity_vector()) ** 0.5
+        top = max(blk.bounds(self.dim, self.tank.size)[1][-1] for blk in self.soil_blocks)
+        return sp.constrained_modulus((1.0 - sp.porosity) * sp.grain_density * g * top)
+
+    def pore_water_speed(self) -> float:
+        """Sound speed at which the water's modulus K_f = rho_w c0^2 is PORE_WATER_STIFFNESS M (m/s; 0
+        without soil): the storage 1 / K_f then slows consolidation by less than 5 % (docs/biot.md)."""
+        m = self.soil_modulus()
+        return 0.0 if m is None else (PORE_WATER_STIFFNESS * m / self.fluid.density) ** 0.5
+
     def sound_speed(self) -> float:
-        """Sound speed c0 of the water equation of state (m/s), mode wcsph_biot."""
+        """Sound speed c0 of the water equation of state (m/s), mode wcsph_biot: the key, or the larger of
+        speed_factor x expected_speed and, with soil, `pore_water_speed`."""
         if self.wcsph.water.sound_speed is not None:
             return self.wcsph.water.sound_speed
-        return self.wcsph.water.speed_factor * self.expected_speed()
+        return max(self.wcsph.water.speed_factor * self.expected_speed(), self.pore_water_speed())
+
+
+#: smallest ratio K_f / M of the water's EOS modulus to the soil's constrained modulus that the default
+#: sound speed gives a scene with soil: the model's storage is 1 / K_f per mixture volume, so consolidation
+#: runs with c_v = k / (gamma_w (1 / M + 1 / K_f)) = k M / gamma_w / (1 + M / K_f), 1 / 1.05 = 0.952 of the
+#: physical value at 20 (docs/biot.md, "Storage and c_v")
+PORE_WATER_STIFFNESS = 20.0
 
 
 def check(cfg: "Config") -> None:

@@ -15,17 +15,21 @@ fluid pair loops skip them. Per step, after the fluid density pass and force pas
    water, implicit (docs/biot.md), written to `adrag` which the next kick adds to the acceleration.
 """
 
+import logging
 import math
 
 import numpy as np
 import taichi as ti
 
 from .. import guard
+from ..config.schema import PORE_WATER_STIFFNESS
 from ..scene import SOIL, WALL, WATER
 from ..sph import kernels, operators
 from . import soil, terms
 
 _NRED_S = 6
+
+log = logging.getLogger("taichi_sph")
 
 
 class SoilStep:
@@ -54,6 +58,20 @@ class SoilStep:
         else:  # where tau_f vanishes: p = -c cot(phi)
             tan_mc = math.tan(math.radians(self.phi_deg))
             self.t_cut = sp.cohesion / tan_mc if tan_mc > 0 else 0.0
+        # pore water stiff beside the skeleton (schema.PORE_WATER_STIFFNESS): K_f / M in the run file, and a
+        # warning where a config's sound speed leaves the water softer
+        self.run_attrs = {}
+        m_soil = cfg.soil_modulus() if self.has_soil and self.n_water > 0 else None
+        if m_soil is not None:
+            ratio = self.rho_w * self.c_w**2 / m_soil
+            self.run_attrs["pore_water_modulus_ratio"] = ratio
+            if ratio < PORE_WATER_STIFFNESS * (1.0 - 1e-9):
+                log.warning("pore water K_f = rho_w c0^2 = %.4g Pa is %.3g x the soil's constrained modulus M = "
+                            "%.4g Pa (below %g): consolidation runs at c_v = k M / gamma_w / (1 + M / K_f), %.0f %% "
+                            "of the physical value; raise wcsph.water.sound_speed to %.4g m/s or more (or leave it "
+                            "to its default), or check wcsph.soil.youngs_modulus, exponent, poisson",
+                            self.rho_w * self.c_w**2, ratio, m_soil, PORE_WATER_STIFFNESS, 100.0 / (1.0 + 1.0 / ratio),
+                            cfg.pore_water_speed())
         self.alpha_s = sp.alpha
         self.g_over_k = self.g_abs / sp.permeability
         self.damping = sp.damping
