@@ -244,3 +244,24 @@ def test_terzaghi_consolidation(run_cli, tmp_path):
     cv = consolidation_coefficient(5e-3, 1.0e6, 0.3)
     for tv, (err, ue, exact) in isochrone_errors(out, base, 500.0, 0.4, 0.2, cv).items():
         assert err < 0.05, (tv, np.round(ue, 3), np.round(exact, 3))
+
+
+def test_soft_pore_water_warns_and_is_recorded(run_cli, tmp_path):
+    """A config whose water is softer than 20 M (consolidation.yaml with the seed-like c0 = 20 m/s: K_f =
+    0.4 MPa, M = E (1 - nu) / ((1 + nu) (1 - 2 nu)) = 1.346 MPa) warns, naming the keys, and the run file
+    records K_f / M = 0.297; the default sound speed records 20 and does not warn."""
+    import h5py
+
+    soft, stiff = tmp_path / "soft.h5", tmp_path / "stiff.h5"
+    r = run_cli("--config", "configs/consolidation.yaml", "--set", "end_time=0.002", "--set",
+                "wcsph.water.sound_speed=20", "--out", soft, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    assert "wcsph.water.sound_speed" in r.stderr and "wcsph.soil.youngs_modulus" in r.stderr, r.stderr
+    r2 = run_cli("--config", "configs/consolidation.yaml", "--set", "end_time=0.002", "--out", stiff, "--no-progress")
+    assert r2.returncode == 0, r2.stderr
+    assert "wcsph.water.sound_speed" not in r2.stderr, r2.stderr
+    m = 1.0e6 * 0.7 / (1.3 * 0.4)
+    with h5py.File(soft) as f:
+        assert f.attrs["pore_water_modulus_ratio"] == pytest.approx(1000.0 * 20.0**2 / m, rel=1e-12)
+    with h5py.File(stiff) as f:
+        assert f.attrs["pore_water_modulus_ratio"] == pytest.approx(20.0, rel=1e-9)

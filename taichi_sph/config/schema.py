@@ -292,7 +292,9 @@ class WCSPHWater(Strict):
 
     #: exponent gamma of the Tait equation of state eq 41
     gamma: PosFloat = 7.0
-    #: sound speed c0 (m/s) of eq 41; default speed_factor x expected_speed
+    #: sound speed c0 (m/s) of eq 41; default speed_factor x expected_speed, and with soil at least
+    #: sqrt(20 M / rho_w), M the soil's constrained modulus (K_f = rho_w c0^2 >= 20 M: consolidation within
+    #: 5 % of Terzaghi's c_v, docs/biot.md); a value below that logs a warning
     sound_speed: PosFloat | None = None
     #: c0 = speed_factor x expected_speed when sound_speed is not given (at least 10: density varies < 1 %)
     speed_factor: Annotated[float, Field(ge=10)] = 10.0
@@ -384,7 +386,9 @@ class ExcessPorePressure(Strict):
     top (y the vertical coordinate), added to the water's pressure inside the soil and taken from the
     soil's vertical effective stress (K0 times it from the horizontal), so the total stress is unchanged
     (seed 002 fig 10). The layer may reach below the tank floor: a layer drained at both faces is
-    symmetric about its middle, which an impermeable floor can stand for."""
+    symmetric about its middle, which an impermeable floor can stand for. The soil starts at the settlement
+    rate of Terzaghi's layer at t = 0+, v_s = (k / gamma_w) d u_e / dy along the vertical (the mixture's
+    flux zero, as in a laterally confined layer over an impermeable base; docs/biot.md)."""
 
     #: largest excess pore pressure u0 (Pa)
     amplitude: float
