@@ -150,10 +150,13 @@ def excess_pore_pressure(cfg, scene, p, rho, mass, stress, water, vel) -> None:
     soil = np.nonzero(kind == SOIL)[0]
     wat = np.nonzero(kind == WATER)[0]
     if len(wat):
-        inside = (y[soil] >= ex.bottom) & (y[soil] <= ex.top)
-        du_dy = ex.amplitude * np.pi / (ex.top - ex.bottom) * np.cos(np.pi * (y[soil] - ex.bottom) / (ex.top - ex.bottom))
-        g_abs = float(np.linalg.norm(cfg.gravity_vector()))
-        vel[soil, -1] = np.where(inside, cfg.wcsph.soil.permeability / (water[0] * g_abs) * du_dy, 0.0)
+        # the settlement rate at t = 0+ (not for a held skeleton, which keeps its place)
+        if not cfg.wcsph.soil.fixed and not any(b.fixed for b in cfg.soil_blocks):
+            inside = (y[soil] >= ex.bottom) & (y[soil] <= ex.top)
+            arg = np.pi * (y[soil] - ex.bottom) / (ex.top - ex.bottom)
+            du_dy = ex.amplitude * np.pi / (ex.top - ex.bottom) * np.cos(arg)
+            g_abs = float(np.linalg.norm(cfg.gravity_vector()))
+            vel[soil, -1] = np.where(inside, cfg.wcsph.soil.permeability / (water[0] * g_abs) * du_dy, 0.0)
         from scipy.spatial import cKDTree  # start state only
 
         d, _ = cKDTree(scene.position[soil]).query(scene.position[wat], k=1)
