@@ -125,7 +125,8 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                            config_yaml=resolved_yaml(cfg), kind=scene.kind, ids=scene.ids, code_version=code_version(),
                            markers=_markers_out(scene),
                            attrs={"precision": be["precision"], "particle_mass": solver.mass, "rho_w": solver.rho_w,
-                                  "n_water": solver.n_water, "support_radius": solver.re, "status": "running"})
+                                  "n_water": solver.n_water, "support_radius": solver.re, "status": "running",
+                                  **getattr(solver, "run_attrs", {})})
     else:
         writer = RunWriter.reopen(out_path, n_frames=saved["n_frames"], n_diagnostics=saved["n_diagnostics"],
                                   probe_samples=saved["probe_samples"])

@@ -157,9 +157,10 @@ def test_embankment_first_yield_at_landside_toe(run_cli, tmp_path):
     > 1e-2 runs from there to the landside crest corner (a slip surface).
 
     Why: the landside slope below the phreatic level is a seepage face; with seepage parallel to it a
-    slope stands only below atan(gamma' tan(phi) / gamma_sat) = atan(0.5 x 990 / 1990) = 13.9 deg, and
-    this slope is 21.8 deg (the riverside toe, submerged, needs only 21.8 < phi = 26.6 deg). The yield
-    therefore starts in stage 1, before the river rises. Control, the same wetted levee with 1:6 slopes
+    slope stands only below atan(gamma' sin(phi) / gamma_sat) = atan(0.5 x 990 / 1990) = 13.9 deg (phi = 30
+    deg, sin(phi) the friction coefficient of a non-dilatant material in simple shear, docs/biot.md), and
+    this slope is 21.8 deg (the riverside toe, submerged, needs only 21.8 < phi* = atan(sin phi) = 26.6
+    deg). The yield therefore starts in stage 1, before the river rises. Control, the same wetted levee with 1:6 slopes
     (9.5 deg < 13.9 deg, crest 0.10 m high): no particle within 0.3 m of its landside toe yields
     (measured: none east of x 0.9 m, toe at 1.375 m), so the localisation is the seepage face's, not the
     floor's or the K0 start's."""

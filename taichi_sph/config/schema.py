@@ -9,6 +9,7 @@ walls are built outside it. Validation runs before any Taichi kernel is compiled
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Literal, Optional, Union
 
@@ -291,7 +292,9 @@ class WCSPHWater(Strict):
 
     #: exponent gamma of the Tait equation of state eq 41
     gamma: PosFloat = 7.0
-    #: sound speed c0 (m/s) of eq 41; default speed_factor x expected_speed
+    #: sound speed c0 (m/s) of eq 41; default speed_factor x expected_speed, and with soil at least
+    #: sqrt(20 M / rho_w), M the soil's constrained modulus (K_f = rho_w c0^2 >= 20 M: consolidation within
+    #: 5 % of Terzaghi's c_v, docs/biot.md); a value below that logs a warning
     sound_speed: PosFloat | None = None
     #: c0 = speed_factor x expected_speed when sound_speed is not given (at least 10: density varies < 1 %)
     speed_factor: Annotated[float, Field(ge=10)] = 10.0
@@ -383,7 +386,9 @@ class ExcessPorePressure(Strict):
     top (y the vertical coordinate), added to the water's pressure inside the soil and taken from the
     soil's vertical effective stress (K0 times it from the horizontal), so the total stress is unchanged
     (seed 002 fig 10). The layer may reach below the tank floor: a layer drained at both faces is
-    symmetric about its middle, which an impermeable floor can stand for."""
+    symmetric about its middle, which an impermeable floor can stand for. The soil starts at the settlement
+    rate of Terzaghi's layer at t = 0+, v_s = (k / gamma_w) d u_e / dy along the vertical (the mixture's
+    flux zero, as in a laterally confined layer over an impermeable base; docs/biot.md)."""
 
     #: largest excess pore pressure u0 (Pa)
     amplitude: float
@@ -428,12 +433,20 @@ class WCSPHSoil(Strict):
     stress_floor: PosFloat = 1000.0
     #: Poisson's ratio nu (seed: 0.3)
     poisson: Annotated[float, Field(gt=0, lt=0.5)] = 0.3
-    #: tan(phi), phi the friction angle at failure: tau_f = p tan(phi) + cohesion (seed: 0.5)
-    tan_phi: NonNegFloat = 0.5
-    #: cohesion c (Pa) (seed: none)
+    #: Mohr-Coulomb friction angle phi (degrees): failure where the in-plane Mohr circle's radius reaches
+    #: p sin(phi) + c cos(phi), p the in-plane mean effective stress (2D, plane strain); in 3D the
+    #: Drucker-Prager cone sqrt(J2) = p sin(phi) + c cos(phi) that matches Mohr-Coulomb in plane strain
+    #: (docs/biot.md). Give this or `tan_phi`, not both; default the seed's tan_phi = 0.5, i.e. 30 deg
+    friction_angle: Annotated[float, Field(ge=0, lt=90)] | None = None
+    #: the seed's form tau_f = p tan_phi on the Mohr circle's radius (seed 002 section 2.4 (2)), which is
+    #: Mohr-Coulomb with sin(phi) = tan_phi: mapped to friction_angle = asin(tan_phi) (0.5 -> 30 deg, not
+    #: atan(0.5) = 26.6 deg); at most 1. Give this or `friction_angle`, not both
+    tan_phi: NonNegFloat | None = None
+    #: Mohr-Coulomb cohesion c (Pa) (seed: none)
     cohesion: NonNegFloat = 0.0
     #: largest mean tension the soil carries (Pa, >= 0); beyond it the stress is set to zero (tension
-    #: cut-off). Default: the tension at which tau_f vanishes, cohesion / tan(phi) (0 without cohesion)
+    #: cut-off). Default: the tension at which the failure shear stress vanishes, c / tan(phi) (0 without
+    #: cohesion)
     tension_cutoff: NonNegFloat | None = None
     #: initial ratio of horizontal to vertical effective stress K0; default nu / (1 - nu) (elastic, at rest)
     k0: PosFloat | None = None
@@ -452,6 +465,19 @@ class WCSPHSoil(Strict):
     #: hold the soil particles where they are (a rigid porous skeleton: water seeps through it, the soil
     #: neither moves nor limits the time step); for steady-seepage checks
     fixed: bool = False
+
+    def friction_angle_deg(self) -> float:
+        """Mohr-Coulomb friction angle (degrees): `friction_angle`, or asin(tan_phi) (seed default 0.5)."""
+        if self.friction_angle is not None:
+            return self.friction_angle
+        return math.degrees(math.asin(min(0.5 if self.tan_phi is None else self.tan_phi, 1.0)))
+
+    def constrained_modulus(self, p: float) -> float:
+        """Constrained (oedometric) modulus M = E (1 - nu) / ((1 + nu) (1 - 2 nu)) at mean effective stress p
+        (Pa), E of eq 42 (with the floor); in 2D the plane-strain P-wave modulus lambda + 2 G, the same value."""
+        nu = self.poisson
+        e = self.youngs_modulus * (max(p, self.stress_floor) / self.reference_stress) ** self.exponent
+        return e * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu))
 
 
 class InflowSource(Box):
@@ -668,11 +694,36 @@ class Config(Strict):
                   + [blk.bounds(self.dim, self.tank.size)[1][-1] for blk in self.soil_blocks])
         return max((2.0 * g * top) ** 0.5, 1.0e-3)
 
+    def soil_modulus(self) -> float | None:
+        """Constrained modulus M of the soil (Pa) at the largest vertical effective stress of the scene, the
+        dry weight of the highest soil top, (1 - n) rho_s |g| top (an upper bound of M where E grows with
+        p); None without soil or with a rigid skeleton (`wcsph.soil.fixed`), which stores no water."""
+        sp = self.wcsph.soil
+        if self.mode != "wcsph_biot" or not self.soil_blocks or not self.water or sp.fixed:
+            return None
+        g = sum(c * c for c in self.gravity_vector()) ** 0.5
+        top = max(blk.bounds(self.dim, self.tank.size)[1][-1] for blk in self.soil_blocks)
+        return sp.constrained_modulus((1.0 - sp.porosity) * sp.grain_density * g * top)
+
+    def pore_water_speed(self) -> float:
+        """Sound speed at which the water's modulus K_f = rho_w c0^2 is PORE_WATER_STIFFNESS M (m/s; 0
+        without soil): the storage 1 / K_f then slows consolidation by less than 5 % (docs/biot.md)."""
+        m = self.soil_modulus()
+        return 0.0 if m is None else (PORE_WATER_STIFFNESS * m / self.fluid.density) ** 0.5
+
     def sound_speed(self) -> float:
-        """Sound speed c0 of the water equation of state (m/s), mode wcsph_biot."""
+        """Sound speed c0 of the water equation of state (m/s), mode wcsph_biot: the key, or the larger of
+        speed_factor x expected_speed and, with soil, `pore_water_speed`."""
         if self.wcsph.water.sound_speed is not None:
             return self.wcsph.water.sound_speed
-        return self.wcsph.water.speed_factor * self.expected_speed()
+        return max(self.wcsph.water.speed_factor * self.expected_speed(), self.pore_water_speed())
+
+
+#: smallest ratio K_f / M of the water's EOS modulus to the soil's constrained modulus that the default
+#: sound speed gives a scene with soil: the model's storage is 1 / K_f per mixture volume, so consolidation
+#: runs with c_v = k / (gamma_w (1 / M + 1 / K_f)) = k M / gamma_w / (1 + M / K_f), 1 / 1.05 = 0.952 of the
+#: physical value at 20 (docs/biot.md, "Storage and c_v")
+PORE_WATER_STIFFNESS = 20.0
 
 
 def check(cfg: "Config") -> None:
@@ -939,8 +990,15 @@ def _check_soil_blocks(cfg: "Config") -> None:
     soil = cfg.wcsph.soil
     if soil.start_from is not None and not Path(soil.start_from.run).is_file():
         _fail("wcsph.soil.start_from.run", f"no run file '{soil.start_from.run}'")
-    if soil.tension_cutoff is not None and soil.tan_phi > 0 and soil.tension_cutoff > soil.cohesion / soil.tan_phi:
-        _fail("wcsph.soil.tension_cutoff", f"must not exceed cohesion / tan_phi = {soil.cohesion / soil.tan_phi:g} Pa "
+    if soil.friction_angle is not None and soil.tan_phi is not None:
+        _fail("wcsph.soil.tan_phi", "give either friction_angle (Mohr-Coulomb, degrees) or tan_phi (the seed's "
+              "form, sin(phi) = tan_phi), not both")
+    if soil.tan_phi is not None and soil.tan_phi > 1.0:
+        _fail("wcsph.soil.tan_phi", f"{soil.tan_phi:g} exceeds 1: the seed's tau_f = p tan_phi is Mohr-Coulomb with "
+              "sin(phi) = tan_phi, which has no angle above 1 (give friction_angle in degrees)")
+    tan_mc = math.tan(math.radians(soil.friction_angle_deg()))
+    if soil.tension_cutoff is not None and tan_mc > 0 and soil.tension_cutoff > soil.cohesion / tan_mc:
+        _fail("wcsph.soil.tension_cutoff", f"must not exceed cohesion / tan(phi) = {soil.cohesion / tan_mc:g} Pa "
               "(beyond it the failure shear stress would be negative)")
 
 

@@ -3,9 +3,13 @@ of configs/consolidation.yaml: the exact isochrones and the error of a run again
 
 The layer of thickness H = 2 x (soil height) is drained at both faces; its lower half is replaced by the
 impermeable tank floor (the symmetry plane), so with the sine start u_e / u0 = cos(pi y / H) and
-exactly u_e / u0 = cos(pi y / H) exp(-pi^2 Tv), Tv = c_v t / H^2 (eq 56), with the model's
-c_v = k / (rho_w g (1 / M + 1 / K_f)): M = E (1 - nu) / ((1 + nu) (1 - 2 nu)) the constrained modulus
-(plane strain) and K_f = rho_w c0^2 the water's EOS modulus (docs/biot.md, "Storage and c_v").
+exactly u_e / u0 = cos(pi y / H) exp(-pi^2 Tv), Tv = c_v t / H^2 (eq 56), with Terzaghi's (physical)
+c_v = k M / (rho_w g) of eq 55 (`consolidation_coefficient`), M = E (1 - nu) / ((1 + nu) (1 - 2 nu)) the
+constrained modulus (plane strain; the seed's eq 55 writes the bulk modulus B^e of its eq 43 there, the
+oedometric modulus is the one a laterally confined layer has). The model's own value, with the storage
+1 / K_f of the water's EOS (K_f = rho_w c0^2), is `model_consolidation_coefficient` = k / (rho_w g (1 / M
++ 1 / K_f)); the default sound speed keeps K_f >= 20 M, so the two differ by at most 5 % (docs/biot.md,
+"Storage and c_v").
 
 u_e is the water pressure of the run minus that of the same run without the excess (the model's own
 hydrostatic state differs from rho_w g z by about 1 % of the overburden)."""
@@ -18,11 +22,22 @@ WATER = 0
 TV = (0.05, 0.1, 0.2, 0.5)
 
 
-def consolidation_coefficient(k: float, youngs: float, poisson: float, sound_speed: float,
-                              rho_w: float = 1000.0, g: float = G) -> float:
-    """c_v = k / (rho_w g (1 / M + 1 / K_f)) (m^2/s), M plane-strain constrained modulus, K_f = rho_w c0^2."""
-    m_oed = youngs * (1 - poisson) / ((1 + poisson) * (1 - 2 * poisson))
-    return k / (rho_w * g * (1 / m_oed + 1 / (rho_w * sound_speed**2)))
+def constrained_modulus(youngs: float, poisson: float) -> float:
+    """M = E (1 - nu) / ((1 + nu) (1 - 2 nu)) (Pa), the oedometric modulus (plane strain: lambda + 2 G)."""
+    return youngs * (1 - poisson) / ((1 + poisson) * (1 - 2 * poisson))
+
+
+def consolidation_coefficient(k: float, youngs: float, poisson: float, rho_w: float = 1000.0,
+                              g: float = G) -> float:
+    """Terzaghi's c_v = k M / (rho_w g) (m^2/s) of eq 55, M the constrained modulus: incompressible water."""
+    return k * constrained_modulus(youngs, poisson) / (rho_w * g)
+
+
+def model_consolidation_coefficient(k: float, youngs: float, poisson: float, sound_speed: float,
+                                    rho_w: float = 1000.0, g: float = G) -> float:
+    """The model's c_v = k / (rho_w g (1 / M + 1 / K_f)) (m^2/s), K_f = rho_w c0^2 the water's EOS modulus
+    (its storage per mixture volume is 1 / K_f, docs/biot.md)."""
+    return k / (rho_w * g * (1 / constrained_modulus(youngs, poisson) + 1 / (rho_w * sound_speed**2)))
 
 
 def exact_excess(y, tv: float, half: float) -> np.ndarray:

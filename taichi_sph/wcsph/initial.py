@@ -125,14 +125,21 @@ def initial_state(cfg, scene, materials: dict) -> dict:
     stage = load_stage(cfg, scene)
     if stage is not None:  # two-stage run: the soil of the earlier stage (stage.py)
         out["plastic_strain"] = apply_stage(stage, scene, rho, out["stress"])
-    excess_pore_pressure(cfg, scene, p, rho, mass, out["stress"], materials[WATER])
+    excess_pore_pressure(cfg, scene, p, rho, mass, out["stress"], materials[WATER], vel)
     return out
 
 
-def excess_pore_pressure(cfg, scene, p, rho, mass, stress, water) -> None:
+def excess_pore_pressure(cfg, scene, p, rho, mass, stress, water, vel) -> None:
     """`wcsph.soil.initial_excess_pressure` (in place): u_e = A sin(pi (y - bottom) / (top - bottom)) added
     to the pressure of water particles that share a soil particle's place (their density from the Tait
-    EOS at the new pressure) and taken from the soil's effective stress (vertical u_e, horizontal K0 u_e)."""
+    EOS at the new pressure) and taken from the soil's effective stress (vertical u_e, horizontal K0 u_e).
+    The soil starts moving as the consolidating layer does at t = 0+ (Terzaghi's quasi-static state, seed
+    002 eq 55): the water seeps at Darcy's q = -(k / gamma_w) d u_e / dy relative to the skeleton, and with
+    the layer laterally confined over an impermeable base the mixture's flux n v_f + (1 - n) v_s (the
+    velocity the water particles carry) is zero, so the skeleton settles at v_s = -q = (k / gamma_w)
+    d u_e / dy and the water particles stay at rest. Started from rest instead, the layer reaches that
+    speed through an undrained compression wave of amplitude ~rho c v_s (with the default sound speed,
+    0.2-0.4 u0 in configs/consolidation.yaml, decaying over ~0.1 s)."""
     ex = cfg.wcsph.soil.initial_excess_pressure
     kind = scene.kind
     if ex is None or not (kind == SOIL).any():
@@ -143,6 +150,13 @@ def excess_pore_pressure(cfg, scene, p, rho, mass, stress, water) -> None:
     soil = np.nonzero(kind == SOIL)[0]
     wat = np.nonzero(kind == WATER)[0]
     if len(wat):
+        # the settlement rate at t = 0+ (not for a held skeleton, which keeps its place)
+        if not cfg.wcsph.soil.fixed and not any(b.fixed for b in cfg.soil_blocks):
+            inside = (y[soil] >= ex.bottom) & (y[soil] <= ex.top)
+            arg = np.pi * (y[soil] - ex.bottom) / (ex.top - ex.bottom)
+            du_dy = ex.amplitude * np.pi / (ex.top - ex.bottom) * np.cos(arg)
+            g_abs = float(np.linalg.norm(cfg.gravity_vector()))
+            vel[soil, -1] = np.where(inside, cfg.wcsph.soil.permeability / (water[0] * g_abs) * du_dy, 0.0)
         from scipy.spatial import cKDTree  # start state only
 
         d, _ = cKDTree(scene.position[soil]).query(scene.position[wat], k=1)

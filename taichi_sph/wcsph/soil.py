@@ -18,10 +18,22 @@ E / (2 (1 + nu)), and the d-dimensional bulk modulus K_d with dp = K_d tr(eps_do
 Jaumann rate (eq 45): sigma_dot = 2 G eps_dot_d + K_d tr(eps_dot) I + W sigma - sigma W (the objective
 rotation of the stress with the material; for a rigid rotation the principal stresses keep their values).
 
-Plasticity: tau_f = max(p tan(phi) + c, 0); if tau > tau_f the deviator is scaled back radially to
-tau_f (return mapping, no dilatancy, the seed's phi_d = 0); below the tension cut-off (p < -t) the
-stress is set to -t I. The plastic shear strain increment (tau - tau_f) / G is accumulated.
+Plasticity (yield surface, docs/biot.md): tau_f = max(p sin(phi) + c cos(phi), 0), phi the Mohr-Coulomb
+friction angle and c the cohesion;
+- 2D: tau is the radius of the in-plane Mohr circle and p its centre, so tau = tau_f is Mohr-Coulomb in
+  plane strain exactly (the circle touches the line tau_n = c + sigma_n tan(phi));
+- 3D: tau = sqrt(J2) and p = I1 / 3: the Drucker-Prager cone that coincides with Mohr-Coulomb in plane
+  strain for this flow rule (deviatoric radial return, no plastic volume change: at plane-strain failure
+  s_zz = 0, so p is the in-plane mean and sqrt(J2) the in-plane radius); it circumscribes the
+  Mohr-Coulomb pyramid in triaxial extension and lies inside it in triaxial compression.
+The seed writes tau_f = p tan(phi) (section 2.4 (2), no cohesion) on the same tau and p: Mohr-Coulomb with
+sin(phi) = tan(phi_seed); a config's `tan_phi` is mapped so (schema.WCSPHSoil.friction_angle_deg).
+If tau > tau_f the deviator is scaled back radially to tau_f (return mapping, no dilatancy, the seed's
+phi_d = 0); below the tension cut-off (p < -t) the stress is set to -t I. The plastic shear strain
+increment (tau - tau_f) / G is accumulated.
 """
+
+import math
 
 import numpy as np
 import taichi as ti
@@ -58,9 +70,10 @@ def mean_and_shear(sig, dim: ti.template()):
 
 
 @ti.func
-def stress_update(sig, L, dt, e0, p_ref, m, p_floor, nu, k_fac, tan_phi, coh, t_cut, dim: ti.template()):
-    """One explicit step of eq 42-45 with the return to the yield surface. `L` the velocity gradient
-    d v_a / d x_b, `k_fac` = K_d / E. Returns (sigma^{n+1}, plastic shear strain increment, E used)."""
+def stress_update(sig, L, dt, e0, p_ref, m, p_floor, nu, k_fac, sin_phi, c_cos, t_cut, dim: ti.template()):
+    """One explicit step of eq 42-45 with the return to the yield surface tau_f = p sin(phi) + c cos(phi).
+    `L` the velocity gradient d v_a / d x_b, `k_fac` = K_d / E, `sin_phi` = sin(phi), `c_cos` = c cos(phi).
+    Returns (sigma^{n+1}, plastic shear strain increment, E used)."""
     eye = ti.Matrix.identity(float, dim)
     p0, _, _ = mean_and_shear(sig, dim)
     e = youngs_modulus(p0, e0, p_ref, m, p_floor)
@@ -78,11 +91,17 @@ def stress_update(sig, L, dt, e0, p_ref, m, p_floor, nu, k_fac, tan_phi, coh, t_
         out = -t_cut * eye
         dgam = tau / g
     else:
-        tau_f = ti.max(p * tan_phi + coh, 0.0)
+        tau_f = ti.max(p * sin_phi + c_cos, 0.0)
         if tau > tau_f:
             out = p * eye + s * (tau_f / tau)
             dgam = (tau - tau_f) / g
     return out, dgam, e
+
+
+def yield_constants(friction_angle_deg: float, cohesion: float) -> tuple[float, float]:
+    """(sin(phi), c cos(phi)) of the yield surface tau_f = p sin(phi) + c cos(phi)."""
+    phi = math.radians(friction_angle_deg)
+    return math.sin(phi), cohesion * math.cos(phi)
 
 
 def geostatic_stress(sigma_v: np.ndarray, k0: float, dim: int) -> np.ndarray:

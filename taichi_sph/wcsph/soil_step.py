@@ -15,17 +15,21 @@ fluid pair loops skip them. Per step, after the fluid density pass and force pas
    water, implicit (docs/biot.md), written to `adrag` which the next kick adds to the acceleration.
 """
 
+import logging
 import math
 
 import numpy as np
 import taichi as ti
 
 from .. import guard
+from ..config.schema import PORE_WATER_STIFFNESS
 from ..scene import SOIL, WALL, WATER
 from ..sph import kernels, operators
 from . import soil, terms
 
 _NRED_S = 6
+
+log = logging.getLogger("taichi_sph")
 
 
 class SoilStep:
@@ -46,12 +50,28 @@ class SoilStep:
         self.nu_s = sp.poisson
         self.k_fac = soil.bulk_modulus_factor(cfg.dim, sp.poisson)
         self.m_fac = soil.p_wave_factor(cfg.dim, sp.poisson)
-        self.tan_phi = sp.tan_phi
-        self.coh_s = sp.cohesion
+        # yield surface tau_f = p sin(phi) + c cos(phi) (soil.py; `tan_phi` given: sin(phi) = tan_phi)
+        self.phi_deg = sp.friction_angle_deg()
+        self.sin_phi, self.c_cos = soil.yield_constants(self.phi_deg, sp.cohesion)
         if sp.tension_cutoff is not None:
             self.t_cut = sp.tension_cutoff
-        else:
-            self.t_cut = sp.cohesion / sp.tan_phi if sp.tan_phi > 0 else 0.0
+        else:  # where tau_f vanishes: p = -c cot(phi)
+            tan_mc = math.tan(math.radians(self.phi_deg))
+            self.t_cut = sp.cohesion / tan_mc if tan_mc > 0 else 0.0
+        # pore water stiff beside the skeleton (schema.PORE_WATER_STIFFNESS): K_f / M in the run file, and a
+        # warning where a config's sound speed leaves the water softer
+        self.run_attrs = {}
+        m_soil = cfg.soil_modulus() if self.has_soil and self.n_water > 0 else None
+        if m_soil is not None:
+            ratio = self.rho_w * self.c_w**2 / m_soil
+            self.run_attrs["pore_water_modulus_ratio"] = ratio
+            if ratio < PORE_WATER_STIFFNESS * (1.0 - 1e-9):
+                log.warning("pore water K_f = rho_w c0^2 = %.4g Pa is %.3g x the soil's constrained modulus M = "
+                            "%.4g Pa (below %g): consolidation runs at c_v = k M / gamma_w / (1 + M / K_f), %.0f %% "
+                            "of the physical value; raise wcsph.water.sound_speed to %.4g m/s or more (or leave it "
+                            "to its default), or check wcsph.soil.youngs_modulus, exponent, poisson",
+                            self.rho_w * self.c_w**2, ratio, m_soil, PORE_WATER_STIFFNESS, 100.0 / (1.0 + 1.0 / ratio),
+                            cfg.pore_water_speed())
         self.alpha_s = sp.alpha
         self.g_over_k = self.g_abs / sp.permeability
         self.damping = sp.damping
@@ -137,7 +157,7 @@ class SoilStep:
                         L -= self.vol0 * vij.outer_product(gw)
                 rho = rhoi * (1.0 - L.trace() * dt)
                 sig, dgam, _e = soil.stress_update(self.sig[i], L, dt, self.e0, self.p_ref, self.m_exp, self.p_floor,
-                                                   self.nu_s, self.k_fac, self.tan_phi, self.coh_s, self.t_cut,
+                                                   self.nu_s, self.k_fac, self.sin_phi, self.c_cos, self.t_cut,
                                                    self.dim)
                 self.sig[i] = sig
                 self.eps_p[i] += dgam
