@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import os
@@ -21,6 +22,9 @@ from .scene import build_scene, describe
 log = logging.getLogger("taichi_sph")
 
 DT_FIXED, DT_CFL, DT_VISCOUS, DT_FORCE, DT_MAX, DT_OUTPUT = range(6)
+#: names of the dt_limit codes, for the log and the run file
+DT_LIMIT_NAMES = {DT_FIXED: "fixed", DT_CFL: "cfl", DT_VISCOUS: "viscous", DT_FORCE: "force", DT_MAX: "max",
+                  DT_OUTPUT: "output"}
 DIAG_COLUMNS = ("time", "dt", "kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
                 "wall_seconds", "dt_limit", "free_surface", "collisions", "isolated")
 #: columns the driver fills itself; the others come from the solver's step() (a solver may name the ones it
@@ -41,12 +45,17 @@ def code_version() -> str:
 
 
 class TimeStepper:
-    """Fixed dt, or dt = min(cfl dx/u, viscous dx^2/nu, force sqrt(dx/|g|), max); reports the binding limit."""
+    """Fixed dt, or dt = min(cfl dx/u, viscous dx^2/nu_E, force sqrt(dx/a_g), max); reports the binding
+    limit. u is the largest pore velocity vD / eps (mode isph reports max_speed so); in porous ground of
+    smallest porosity eps_min (mode isph) the viscosity is nu_E = nu / eps (eq 9b) and gravity
+    accelerates the Darcy velocity at a_g = |g| / eps (eq 19); the drag is implicit and sets no limit."""
 
     def __init__(self, cfg, g_abs: float):
         self.cfg = cfg
         self.fixed = None if cfg.dt == "auto" else float(cfg.dt)
         self.g_abs = g_abs
+        regions = cfg.soil.regions if cfg.mode == "isph" else []
+        self.eps_min = min([1.0, *(float(r.eps0) for r in regions)])
 
     def choose(self, max_speed: float, proposal: tuple[float, int] | None = None) -> tuple[float, int]:
         if proposal is not None:
@@ -60,9 +69,9 @@ class TimeStepper:
             limits[DT_CFL] = ts.cfl * dx / u
         nu = self.cfg.fluid.viscosity
         if nu > 0:
-            limits[DT_VISCOUS] = ts.viscous * dx * dx / nu
+            limits[DT_VISCOUS] = ts.viscous * dx * dx * self.eps_min / nu
         if self.g_abs > 0:
-            limits[DT_FORCE] = ts.force * math.sqrt(dx / self.g_abs)
+            limits[DT_FORCE] = ts.force * math.sqrt(dx * self.eps_min / self.g_abs)
         which = min(limits, key=limits.get)
         return max(limits[which], ts.min), which
 
@@ -142,6 +151,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     wall0 = _time.perf_counter()
     step_wall = 0.0
     volume0 = 0.0
+    limit_counts: dict[int, int] = {}  # steps bound by each dt limit (this process)
     try:
         guard = StabilityGuard(cfg, scene.kind, _reference_density(solver, scene.kind), solver.max_speed_bound(),
                                scene.body, scene.motions)
@@ -180,6 +190,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             t = solver.step_count * stepper.fixed if n_fixed is not None else t + dt
             solver.time = t
             driver = {"time": t, "dt": dt, "wall_seconds": s1 - s0, "dt_limit": limit}
+            limit_counts[limit] = limit_counts.get(limit, 0) + 1
             for key, column in diag.items():
                 column.append(driver[key] if key in driver else last[key])
             guard.after_step(solver.step_count, t, last, lambda: _fastest_particle(solver))
@@ -225,6 +236,14 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
         psps = getattr(solver, "n_fluid", solver.n_water) * steps / step_wall if step_wall > 0 else 0.0
         summary.update(steps=steps, wall_seconds=wall, step_seconds=step_wall, mipps=psps / 1e6,
                        removed_particles=solver.removed_total, phase_seconds=dict(solver.timers))
+        n_limited = sum(limit_counts.values())
+        if n_limited:
+            share = {DT_LIMIT_NAMES[k]: v / n_limited for k, v in sorted(limit_counts.items())}
+            summary["dt_limit_share"] = share
+            writer.set_attrs(dt_limit_share=json.dumps(share))
+            if stepper.fixed is None:
+                log.info("time-step limits that bound: %s",
+                         ", ".join(f"{k} {100 * v:.1f} %" for k, v in share.items()))
         writer.set_attrs(status=summary["status"], exit_reason=summary.get("error", ""), steps=steps,
                          wall_seconds=wall, step_seconds=step_wall, mipps=psps / 1e6,
                          removed_particles=solver.removed_total)

@@ -108,6 +108,8 @@ def test_hydrostatic_run_file_layout(run_cli, tmp_path):
     assert info["n_frames"] == 3
     assert info["mode"] == "isph"
     assert info["format_version"] == 1
+    # a tank at rest has no spray: no water particle without a water neighbour
+    assert info["isolated_water"]["max"] == 0, info["isolated_water"]
 
 
 def test_unstable_run_stops_with_exit_3_and_keeps_frames(run_cli, tmp_path):

@@ -72,8 +72,12 @@ def test_lone_particle_and_droplet_fall_freely(ti_cpu, dim, gradient):
         t = 0.0
         worst_pos, worst_speed = 0.0, 0.0
         while True:
-            solver.step(dt)
+            last = solver.step(dt)
             t += dt
+            if t < 0.1:  # the isolated-particle count: the two lone particles, not the droplet or the pool
+                assert last["isolated"] == 2, last["isolated"]
+                iso = solver.fields_by_id()["isolated"]
+                assert iso[lone].all() and iso[at_wall].all() and iso.sum() == 2
             x = np.empty((solver.n, dim))
             v = np.empty((solver.n, dim))
             x[ids := solver.ids.to_numpy()] = solver.x.to_numpy()
