@@ -120,7 +120,9 @@ def test_xdmf_beside_the_run_names_existing_datasets_with_their_shapes(hydro):
             assert path in f, path
             assert f[path].shape == tuple(int(x) for x in item.get("Dimensions").split()), path
             n_refs += 1
-        assert n_refs == 7 * (1 + 5 + 2)  # per frame: geometry, 5 frame fields (with flag), kind and id
+        # per frame: geometry, 7 frame fields (velocity, pressure, density, active, free_surface,
+        # isolated, flag), kind and id
+        assert n_refs == 7 * (1 + 7 + 2)
 
 
 def test_pictures_during_the_run(hydro, offscreen):

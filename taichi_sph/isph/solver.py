@@ -11,7 +11,8 @@ One step (projection method, eqs 18-31), all particles water or wall:
    eps = 1 and k = dt / rho_w this is eq 31 divided by rho_w / dt. Free-surface rows are Dirichlet.
    Walls: a wall particle seen from i carries P_i + rho_w g . (x_w - x_i) (Neumann with hydrostatic
    correction), so walls add only known terms and the matrix stays symmetric positive definite.
-4. corrector (eq 20): v = v* - k grad P, gradient eq 12 with kernel-gradient correction by default.
+4. corrector (eq 20): v = v* - k grad P, gradient eq 12 with kernel-gradient correction by default;
+   walls carry P_i hydrostatic across the wall and the water's own gradient along its face.
 5. advection x += dt v / eps (pore velocity) or dt v (Darcy velocity, `advection: darcy`).
 """
 
