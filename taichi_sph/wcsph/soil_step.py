@@ -97,6 +97,11 @@ class SoilStep:
         self.adrag = ti.Vector.field(dim, float, ns)  # drag acceleration of eq 46, added by the kick
         # water acceleration without drag inside the soil (scratch of the drag pass, not carried over)
         self.amix = ti.Vector.field(dim, float, ns)
+        # the Biot drag force of eq 46-47 on each particle (N; N/m in 2D), the pair part only: the water's
+        # n_i phi_s (g / k) (u - v_s) and the soil's C_s phi_w (u - v_s) times their masses (scratch)
+        self.fdrag = ti.Vector.field(dim, float, ns)
+        # momentum check of the drag: sum over all particles of fdrag (dim) and the largest |fdrag|
+        self.red_drag = ti.Vector.field(dim + 1, float, ())
         self.red_soil = ti.Vector.field(_NRED_S, float, ())
         # 1 for a particle of a fixed soil block, indexed by particle id (never reordered, no state)
         self.sfix = ti.field(ti.i32, n if self.block_fixed else 1)
@@ -351,6 +356,7 @@ class SoilStep:
                     amix = n_i * ai + (1.0 - n_i) * abar
                     q = ((self.v[i] + dt * amix) - (vbar + dt * abar)) / (1.0 + dt * n_i * (cw + cs))
                     ad = amix - ai + ((1.0 - n_i) * cs - n_i * cw) * q
+                    self.fdrag[i] = -self.m[i] * n_i * cw * q
                 self.adrag[i] = ad
                 self.amix[i] = amix
 
@@ -392,6 +398,23 @@ class SoilStep:
                     if self.sfix[self.ids[i]] == 1:
                         ad = ti.Vector.zero(float, self.dim)
                 self.adrag[i] = ad
+                self.fdrag[i] = self.m[i] * ad
+
+    @ti.kernel
+    def _k_drag_momentum(self):
+        """Sum over all particles of the drag forces of eq 46-47 (`fdrag`) and the largest of them."""
+        tot = ti.Vector.zero(float, self.dim)
+        big = 0.0
+        for i in range(self.n):
+            if self.fmask[i] == 2 or (self.fmask[i] == 1 and self.kind[i] == WATER):
+                f = self.fdrag[i]
+                tot += f
+                ti.atomic_max(big, f.norm())
+        out = ti.Vector.zero(float, self.dim + 1)
+        for d in ti.static(range(self.dim)):
+            out[d] = tot[d]
+        out[self.dim] = big
+        self.red_drag[None] = out
 
     # ------------------------------------------------------------------ host side
     def _soil_stress(self, dt: float):
@@ -407,8 +430,13 @@ class SoilStep:
         self.last["kinetic_energy"] += float(r[0])
         self.last["max_speed"] = max(self.last["max_speed"], float(r[1]))
         if self.coupled:
+            self.fdrag.fill(0.0)
             self._k_drag_water(dt)
             self._k_drag_soil(dt)
+            self._k_drag_momentum()
+            r = self.red_drag[None].to_numpy()
+            self.last["drag_sum"] = float(np.linalg.norm(r[:-1]))
+            self.last["drag_max"] = float(r[-1])
 
     def _soil_output(self, order) -> dict:
         """Frame fields of the soil (zero for other particles): effective stress (compression positive),
