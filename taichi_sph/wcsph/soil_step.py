@@ -165,11 +165,14 @@ class SoilStep:
                         vij = terms.boundary_relative_velocity(vi - self.v[j], nrm, beta, self.no_slip)
                         L -= self.vol0 * vij.outer_product(gw)
                 rho = rhoi * (1.0 - L.trace() * dt)
-                sig, dgam, _e = soil.stress_update(self.sig[i], L, dt, self.e0, self.p_ref, self.m_exp, self.p_floor,
-                                                   self.nu_s, self.k_fac, self.sin_phi, self.c_cos, self.t_cut,
-                                                   self.dim)
-                self.sig[i] = sig
-                self.eps_p[i] += dgam
+                # dt = 0 (the interpolation pass of initial_diagnostics) leaves the stress as it is: the return
+                # mapping would otherwise re-project a stress lying on the yield surface and move it by rounding
+                if dt > 0.0:
+                    sig, dgam, _e = soil.stress_update(self.sig[i], L, dt, self.e0, self.p_ref, self.m_exp,
+                                                       self.p_floor, self.nu_s, self.k_fac, self.sin_phi, self.c_cos,
+                                                       self.t_cut, self.dim)
+                    self.sig[i] = sig
+                    self.eps_p[i] += dgam
                 self.rho[i] = rho
                 self.q[i][self.Q_RHO] = rho
                 pore = 0.0
