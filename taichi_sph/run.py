@@ -26,7 +26,7 @@ DT_FIXED, DT_CFL, DT_VISCOUS, DT_FORCE, DT_MAX, DT_OUTPUT = range(6)
 DT_LIMIT_NAMES = {DT_FIXED: "fixed", DT_CFL: "cfl", DT_VISCOUS: "viscous", DT_FORCE: "force", DT_MAX: "max",
                   DT_OUTPUT: "output"}
 DIAG_COLUMNS = ("time", "dt", "kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
-                "wall_seconds", "dt_limit", "free_surface", "collisions", "isolated")
+                "wall_seconds", "dt_limit", "free_surface", "collisions", "isolated", "drag_sum", "drag_max")
 #: columns the driver fills itself; the others come from the solver's step() (a solver may name the ones it
 #: reports in `diagnostic_names`, by default all of DIAG_COLUMNS)
 DRIVER_COLUMNS = ("time", "dt", "wall_seconds", "dt_limit")

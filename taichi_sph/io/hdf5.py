@@ -113,6 +113,8 @@ UNITS: dict[str, str] = {
     "courant": "1",
     "density_error": "1",
     "mipps": "1e6 particle-steps/s",
+    "drag_sum": "N",
+    "drag_max": "N",
     # probes
     "water_level": "m",
     "head": "m",
@@ -126,6 +128,7 @@ _PER_DEPTH_2D: dict[str, str] = {
     "J": "J/m",
     "m^3": "m^2",
     "kg": "kg/m",
+    "N": "N/m",
     "m^3/s": "m^2/s",
 }
 

@@ -10,9 +10,11 @@ fluid pair loops skip them. Per step, after the fluid density pass and force pas
 2. force pass (`_k_soil_forces`): eq 35 with eq 36, gravity, the pore-pressure force -grad p / rho_s
    (per unit soil mass, the (1 - n) grad p of the mixture theory over the soil's (1 - n) rho_s) and an
    optional damping (`wcsph.soil.fixed`: the skeleton is rigid, its acceleration and drag are zero).
-3. drag passes (`_k_drag_water`, then `_k_drag_soil`): the water's mixture momentum inside the soil
-   (pore part n under the water's forces, the rest moving with the soil) and eq 46 between soil and
-   water, implicit (docs/biot.md), written to `adrag` which the next kick adds to the acceleration.
+3. drag passes (`_k_drag_water`, `_k_drag_soil`, `_k_drag_water_after`): the water's mixture momentum
+   inside the soil (pore part n under the water's forces, the rest moving with the soil) and eq 46-47
+   between soil and water as pair forces F_ij = -F_ji (`_pair_drag`), implicit per pair (docs/biot.md),
+   written to `adrag` which the next kick adds to the acceleration; their sum over all particles goes to
+   /diagnostics/drag_sum (momentum check), the largest to drag_max.
 """
 
 import logging
@@ -97,6 +99,13 @@ class SoilStep:
         self.adrag = ti.Vector.field(dim, float, ns)  # drag acceleration of eq 46, added by the kick
         # water acceleration without drag inside the soil (scratch of the drag pass, not carried over)
         self.amix = ti.Vector.field(dim, float, ns)
+        # the Biot drag force of eq 46-47 on each particle (N; N/m in 2D), the pair part only: the water's
+        # n_i phi_s (g / k) (u - v_s) and the soil's C_s phi_w (u - v_s) times their masses (scratch)
+        self.fdrag = ti.Vector.field(dim, float, ns)
+        # momentum check of the drag: sum over all particles of fdrag (dim) and the largest |fdrag|
+        self.red_drag = ti.Vector.field(dim + 1, float, ())
+        # per water particle n_i, f_i = phi_s / sum_soil V_j W_ij and phi_s of the pair drag (scratch)
+        self.wmix = ti.Vector.field(3, float, ns)
         self.red_soil = ti.Vector.field(_NRED_S, float, ())
         # 1 for a particle of a fixed soil block, indexed by particle id (never reordered, no state)
         self.sfix = ti.field(ti.i32, n if self.block_fixed else 1)
@@ -156,11 +165,14 @@ class SoilStep:
                         vij = terms.boundary_relative_velocity(vi - self.v[j], nrm, beta, self.no_slip)
                         L -= self.vol0 * vij.outer_product(gw)
                 rho = rhoi * (1.0 - L.trace() * dt)
-                sig, dgam, _e = soil.stress_update(self.sig[i], L, dt, self.e0, self.p_ref, self.m_exp, self.p_floor,
-                                                   self.nu_s, self.k_fac, self.sin_phi, self.c_cos, self.t_cut,
-                                                   self.dim)
-                self.sig[i] = sig
-                self.eps_p[i] += dgam
+                # dt = 0 (the interpolation pass of initial_diagnostics) leaves the stress as it is: the return
+                # mapping would otherwise re-project a stress lying on the yield surface and move it by rounding
+                if dt > 0.0:
+                    sig, dgam, _e = soil.stress_update(self.sig[i], L, dt, self.e0, self.p_ref, self.m_exp,
+                                                       self.p_floor, self.nu_s, self.k_fac, self.sin_phi, self.c_cos,
+                                                       self.t_cut, self.dim)
+                    self.sig[i] = sig
+                    self.eps_p[i] += dgam
                 self.rho[i] = rho
                 self.q[i][self.Q_RHO] = rho
                 pore = 0.0
@@ -287,17 +299,28 @@ class SoilStep:
                     ti.atomic_min(first_bad, float(self.ids[i]))
         self.red_soil[None] = ti.Vector([ke, vmax, h_over_a, h_over_c, bad, first_bad])
 
+    @ti.func
+    def _movable(self, j):
+        """Whether soil particle j moves: a held skeleton (`soil.fixed`, a fixed block) takes the drag's
+        reaction into its constraint."""
+        movable = True
+        if ti.static(self.soil_fixed):
+            movable = False
+        if ti.static(self.block_fixed):  # noqa: SIM102 (compile-time if)
+            if self.sfix[self.ids[j]] == 1:
+                movable = False
+        return movable
+
     @ti.kernel
     def _k_drag_water(self, dt: float):
-        """Water side of the mixture momentum and the Biot drag (eq 46-47), implicit and local
-        (docs/biot.md). The water particles fill the whole volume, so inside the soil a water particle
-        carries the volume-averaged velocity u = n v_f + (1 - n) v_s: its pore part n moves under n times
-        the water's forces and the drag, its part (1 - n) moves with the soil. With the soil around it
-        (presence phi_s, porosity n_bar, velocity v_bar, acceleration a_bar, drag rate C_s = n rho_w /
-        rho_soil g / k) and n_i = 1 - phi_s (1 - n_bar): A = n_i a_i + (1 - n_i) a_bar; the relative
-        velocity q = u - v_bar after the kick is q* / (1 + dt lambda), q* from the velocities without
-        drag, lambda = n_i (phi_s g / k + C_s); the drag acceleration is (1 - n_i) C_s q - n_i phi_s (g / k) q.
-        `adrag` holds A - a_i plus the drag; `amix` holds A for the soil side."""
+        """Water side of the mixture momentum (docs/biot.md), before the drag. The water particles fill the
+        whole volume, so inside the soil a water particle carries the volume-averaged velocity u = n v_f +
+        (1 - n) v_s: its pore part n moves under n times the water's forces and the drag, its part (1 - n)
+        moves with the soil. With the soil around it (presence phi_s, the soil's share of the support not
+        taken by walls, <= 1; porosity n_bar, acceleration a_bar) and n_i = 1 - phi_s (1 - n_bar):
+        A = n_i a_i + (1 - n_i) a_bar, held in `amix`; `adrag` gets A - a_i, the pair drag of eq 46-47 and
+        the soil's drag share follow in `_k_drag_soil` and `_k_drag_water_after`. `wmix` keeps n_i, the
+        weight factor f_i = phi_s / sum_soil V_j W_ij and phi_s for the pair drag."""
         h = self.h0
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
@@ -306,8 +329,6 @@ class SoilStep:
                 ai = self.a[i]
                 wsum = 0.0
                 nsum = 0.0
-                csum = 0.0
-                vbar = ti.Vector.zero(float, self.dim)
                 abar = ti.Vector.zero(float, self.dim)
                 wall = 0.0
                 for k in range(self.grid.nbr_count[i]):
@@ -324,74 +345,107 @@ class SoilStep:
                         continue
                     rhoj = self.rho[j]
                     wij = kernels.w(ti.sqrt(r2), h, self.dim) * self.m[j] / rhoj
-                    nj = 1.0 - rhoj / self.rho_g
                     wsum += wij
-                    nsum += wij * nj
-                    # a held skeleton does not move: the drag's reaction on it goes into the constraint, so
-                    # the water's part (1 - n) that moves with the soil gets no share of it (C_s = 0 there)
-                    movable = True
-                    if ti.static(self.soil_fixed):
-                        movable = False
-                    if ti.static(self.block_fixed):  # noqa: SIM102 (compile-time if)
-                        if self.sfix[self.ids[j]] == 1:
-                            movable = False
-                    if movable:
-                        csum += wij * nj * self.rho_w / rhoj
-                    vbar += wij * self.v[j]
+                    nsum += wij * (1.0 - rhoj / self.rho_g)
                     abar += wij * self.a[j]
-                ad = ti.Vector.zero(float, self.dim)
                 amix = ai
+                wm = ti.Vector([1.0, 0.0, 0.0])
                 if wsum > 0.0:
                     phi = ti.min(wsum / ti.max(1.0 - wall, 0.5), 1.0)  # the soil's share, walls aside
                     n_i = 1.0 - phi * (1.0 - nsum / wsum)
-                    cs = csum / wsum * self.g_over_k
-                    cw = phi * self.g_over_k
-                    abar /= wsum
-                    vbar /= wsum
-                    amix = n_i * ai + (1.0 - n_i) * abar
-                    q = ((self.v[i] + dt * amix) - (vbar + dt * abar)) / (1.0 + dt * n_i * (cw + cs))
-                    ad = amix - ai + ((1.0 - n_i) * cs - n_i * cw) * q
-                self.adrag[i] = ad
+                    amix = n_i * ai + (1.0 - n_i) * abar / wsum
+                    wm = ti.Vector([n_i, phi / wsum, phi])
+                self.wmix[i] = wm
+                self.adrag[i] = amix - ai
                 self.amix[i] = amix
+
+    @ti.func
+    def _pair_drag(self, i, j, dt):
+        """Biot drag force (eq 46-47) on water particle i from soil particle j (N; N/m in 2D); soil j feels
+        its opposite. F_ij = -m_i n_i (g / k) f_i V_j W_ij q_ij with f_i = phi_s / sum_soil V_j W_ij (so
+        that summed over j it is the water's -m_i n_i phi_s (g / k) (u_i - v_bar), and the soil's sum over i
+        its m_j C_s phi_w (u_bar - v_j) in a uniform interior: m_i n_i g / k = rho_soil V_i C_s with n_i =
+        n there). q_ij is the pair's relative velocity after the kick, implicit: q*_ij / (1 + dt lambda_ij),
+        q*_ij = (u_i + dt A_i) - (v_j + dt a_j), lambda_ij = n_i (phi_s,i g / k + C_s,j phi_w,j) (the rate
+        at which the drag closes u - v_s; C_s,j = 0 for a held skeleton). Both sides evaluate this
+        function with the same (water, soil) arguments, so F_ij = -F_ji to rounding."""
+        f = ti.Vector.zero(float, self.dim)
+        rij = operators.rel(self.x[i], self.x[j], self.period)
+        r2 = rij.dot(rij)
+        if r2 < 4.0 * self.h0 * self.h0:
+            wm = self.wmix[i]
+            rhoj = self.rho[j]
+            cs = 0.0
+            if self._movable(j):
+                cs = (1.0 - rhoj / self.rho_g) * self.rho_w / rhoj * self.g_over_k * self.phi_w[j]
+            lam = wm[0] * (wm[2] * self.g_over_k + cs)
+            c = self.m[i] * wm[0] * self.g_over_k * wm[1] * kernels.w(ti.sqrt(r2), self.h0, self.dim) * (
+                self.m[j] / rhoj)
+            qs = (self.v[i] + dt * self.amix[i]) - (self.v[j] + dt * self.a[j])
+            f = -c / (1.0 + dt * lam) * qs
+        return f
 
     @ti.kernel
     def _k_drag_soil(self, dt: float):
-        """Soil side of the implicit Biot drag (eq 46-47, docs/biot.md): with the water around (presence
-        phi_w, mean velocity without drag u_bar + dt A_bar from `_k_drag_water`) and the soil particle's
-        own v + dt a, q = (u* - v*) / (1 + dt n (g / k + phi_w C_s)), drag acceleration phi_w C_s q with
-        C_s = n rho_w / rho_soil g / k."""
-        h = self.h0
+        """Soil side of the Biot drag (eq 46-47, docs/biot.md): the sum of the pair forces -F_ij of
+        `_pair_drag` over the water around, per unit soil mass; zero for a held skeleton. In a uniform
+        interior this is C_s phi_w (u_bar - v_s) with C_s = n rho_w / rho_soil g / k."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.fmask[i] == 2:
-                xi = self.x[i]
-                wsum = 0.0
-                ubar = ti.Vector.zero(float, self.dim)
+                fsum = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
-                    if self.kind[j] != WATER:
+                    if self.kind[j] == WATER and self.fmask[j] == 1:
+                        fsum -= self._pair_drag(j, i, dt)
+                if not self._movable(i):
+                    fsum = ti.Vector.zero(float, self.dim)
+                self.fdrag[i] = fsum
+                self.adrag[i] = fsum / self.m[i]
+
+    @ti.kernel
+    def _k_drag_water_after(self, dt: float):
+        """Water side of the Biot drag: the pair forces F_ij of `_pair_drag` over the soil around, and the
+        share (1 - n_i) that moves with the soil takes the soil's mean drag acceleration (docs/biot.md)."""
+        h = self.h0
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n):
+            if self.fmask[i] == 1 and self.kind[i] == WATER:
+                fsum = ti.Vector.zero(float, self.dim)
+                wsum = 0.0
+                dbar = ti.Vector.zero(float, self.dim)
+                for k in range(self.grid.nbr_count[i]):
+                    j = self.grid.nbr[i, k]
+                    if self.kind[j] != SOIL or self.fmask[j] != 2:
                         continue
-                    rij = operators.rel(xi, self.x[j], self.period)
+                    fsum += self._pair_drag(i, j, dt)
+                    rij = operators.rel(self.x[i], self.x[j], self.period)
                     r2 = rij.dot(rij)
-                    if r2 >= 4.0 * h * h:
-                        continue
-                    wij = kernels.w(ti.sqrt(r2), h, self.dim) * self.m[j] / self.rho[j]
-                    wsum += wij
-                    ubar += wij * (self.v[j] + dt * self.amix[j])
-                ad = ti.Vector.zero(float, self.dim)
+                    if r2 < 4.0 * h * h:
+                        wij = kernels.w(ti.sqrt(r2), h, self.dim) * self.m[j] / self.rho[j]
+                        wsum += wij
+                        dbar += wij * self.adrag[j]
+                ad = self.adrag[i] + fsum / self.m[i]
                 if wsum > 0.0:
-                    phi = self.phi_w[i]
-                    ubar /= wsum
-                    n_s = 1.0 - self.rho[i] / self.rho_g
-                    cs = n_s * self.rho_w / self.rho[i] * self.g_over_k * phi
-                    q = (ubar - (self.v[i] + dt * self.a[i])) / (1.0 + dt * n_s * (self.g_over_k + cs))
-                    ad = cs * q
-                if ti.static(self.soil_fixed):
-                    ad = ti.Vector.zero(float, self.dim)
-                if ti.static(self.block_fixed):  # noqa: SIM102 (compile-time if)
-                    if self.sfix[self.ids[i]] == 1:
-                        ad = ti.Vector.zero(float, self.dim)
+                    ad += (1.0 - self.wmix[i][0]) * dbar / wsum
+                self.fdrag[i] = fsum
                 self.adrag[i] = ad
+
+    @ti.kernel
+    def _k_drag_momentum(self):
+        """Sum over all particles of the drag forces of eq 46-47 (`fdrag`) and the largest of them."""
+        tot = ti.Vector.zero(float, self.dim)
+        big = 0.0
+        for i in range(self.n):
+            if self.fmask[i] == 2 or (self.fmask[i] == 1 and self.kind[i] == WATER):
+                f = self.fdrag[i]
+                tot += f
+                ti.atomic_max(big, f.norm())
+        out = ti.Vector.zero(float, self.dim + 1)
+        for d in ti.static(range(self.dim)):
+            out[d] = tot[d]
+        out[self.dim] = big
+        self.red_drag[None] = out
 
     # ------------------------------------------------------------------ host side
     def _soil_stress(self, dt: float):
@@ -407,8 +461,14 @@ class SoilStep:
         self.last["kinetic_energy"] += float(r[0])
         self.last["max_speed"] = max(self.last["max_speed"], float(r[1]))
         if self.coupled:
+            self.fdrag.fill(0.0)
             self._k_drag_water(dt)
             self._k_drag_soil(dt)
+            self._k_drag_water_after(dt)
+            self._k_drag_momentum()
+            r = self.red_drag[None].to_numpy()
+            self.last["drag_sum"] = float(np.linalg.norm(r[:-1]))
+            self.last["drag_max"] = float(r[-1])
 
     def _soil_output(self, order) -> dict:
         """Frame fields of the soil (zero for other particles): effective stress (compression positive),

@@ -126,6 +126,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.nu_max = max(nus) if nus else 0.0
 
         self._soil_setup(cfg, scene)
+        if self.coupled:  # the drag's momentum check (soil_step.py)
+            self.diagnostic_names = (*self.diagnostic_names, "drag_sum", "drag_max")
 
         self.h_lo = H_MIN * self.h0 if self.variable_h else self.h0
         self.h_hi = H_MAX * self.h0 if self.variable_h else self.h0
