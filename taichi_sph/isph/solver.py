@@ -46,6 +46,10 @@ _GRAD = {"corrected": GRAD_CORRECTED, "difference": GRAD_DIFFERENCE, "symmetric"
 class ISPHSolver(SolverCommon):
     """State and step of mode `isph`. Built from a validated Config and a Scene."""
 
+    #: the per-step diagnostics step() reports (run.DIAG_COLUMNS lists every mode's)
+    diagnostic_names = ("kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
+                        "free_surface", "collisions", "isolated")
+
     def __init__(self, cfg, scene):
         self.cfg = cfg
         self.dim = dim = cfg.dim
