@@ -1,10 +1,15 @@
 """Mode isph in porous ground: porosity from soil markers (eq 32), the eq 9 coefficients with the drag
 implicit in the projection, and the reduction to free water at eps = 1."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
 from taichi_sph.io.hdf5 import RunFile
+
+from .conftest import ROOT, cli_env
 
 
 G = 9.81
@@ -174,36 +179,58 @@ def test_still_water_over_fine_sand(run_cli, tmp_path):
         assert abs(d["water_volume"][-1] / d["water_volume"][0] - 1) < 0.005
 
 
-def test_permeameter_follows_the_falling_head_ode(run_cli, tmp_path):
-    """configs/permeameter.yaml at dx 5 mm (20 particle spacings over the 10 cm plug): the water level
-    above the plug follows the quasi-steady ODE (SPEC 5) over the first half of the drainage (h from
-    0.2 to 0.1 m, 0.42 s). Measured: within 2.5 % (+2.5 % at 20 ms is the start from rest, which the
-    ODE does not have; within 1.4 % after 60 ms). Bound 5 % (the acceptance value). The result depends
-    on dt more than on dx: at this dt -4.5 / +2.5 / +1.4 % at dx 10 / 5 / 2.5 mm, but +17 % at dt
-    0.25 ms and -23 % at 1 ms (docs/isph.md, Porous ground); a quarter of the plug's particles are
-    flagged free surface by eq 34's count, so the plug holds 1.17 eps0 of its volume in water
-    (docs/isph.md, "Surface test in the ground")."""
-    from taichi_sph.isph.porosity import falling_head_level
+@pytest.fixture(scope="module")
+def permeameter_runs(tmp_path_factory):
+    """configs/permeameter.yaml at dx 5 mm (20 spacings over the 10 cm plug) at dt 1 and 0.5 ms, to
+    0.44 s: the level above the plug (porosity.column_level) against the falling-head ODE per run."""
+    from taichi_sph.isph.porosity import column_level, falling_head_level
 
-    out = tmp_path / "pm.h5"
-    r = run_cli("--config", "configs/permeameter.yaml", "--set", "dx=0.005", "--set", "dt=0.0005",
-                "--set", "end_time=0.44", "--out", out, "--no-progress")
-    assert r.returncode == 0, r.stderr
-    plug_top, width = 0.40, 0.10
-    with RunFile(out) as rf:
-        w = rf.kind == 0
-        h = []
-        for i in range(rf.n_frames):
-            f = rf.frame(i)
-            z = f["position"][w & f["active"]][:, -1]
-            h.append((z > plug_top).sum() * rf.dx**2 / width)  # water above the plug as a height
-        h, t = np.array(h), rf.times
-    ode = falling_head_level(h[0], 0.10, 0.4, 0.01, t_end=t[-1])
-    ref = np.array([ode(ti) for ti in t])
-    first_half = ref >= 0.5 * h[0]
-    assert first_half.sum() > 10
-    assert np.max(np.abs(h[first_half] / ref[first_half] - 1)) < 0.05
+    out = {}
+    for dt in (0.001, 0.0005):
+        path = tmp_path_factory.mktemp("pm") / "pm.h5"
+        r = subprocess.run([sys.executable, "-m", "taichi_sph.cli", "--config", "configs/permeameter.yaml",
+                            "--set", "dx=0.005", "--set", f"dt={dt}", "--set", "end_time=0.44",
+                            "--set", "output.every=0.01", "--out", str(path), "--no-progress"],
+                           cwd=ROOT, env=cli_env(), capture_output=True, text=True, timeout=900)
+        assert r.returncode == 0, r.stderr
+        with RunFile(path) as rf:
+            w = rf.kind == 0
+            frames = [rf.frame(i) for i in range(rf.n_frames)]
+            h = np.array([column_level(f["position"][w & f["active"]][:, -1], 0.40, rf.dx) for f in frames])
+            t = rf.times
+            core = [(w & f["active"] & (f["position"][:, 1] > 0.312) & (f["position"][:, 1] < 0.388)) for f in frames]
+            flagged = np.mean([f["free_surface"][c].mean() for f, c in zip(frames, core)])
+        ode = falling_head_level(h[0], 0.10, 0.4, 0.01, t_end=t[-1])
+        ref = np.array([ode(ti) for ti in t])
+        out[dt] = (t, h / ref - 1.0, ref >= 0.5 * h[0], flagged)
+    return out
 
+
+def test_permeameter_follows_the_falling_head_ode_at_two_time_steps(permeameter_runs):
+    """The water level above the plug follows the quasi-steady ODE (SPEC 5) over the first half of the
+    drainage (h from 0.2 to 0.1 m) at dt 1 and 0.5 ms. Measured (2 threads): largest deviation +2.44 /
+    +2.27 %, at 40-60 ms: the column starts from rest and lags the ODE, which has no inertia (+1.6 % at
+    20 ms); the two runs differ by at most 0.5 point (1.5 points with one thread, at 0.44 s). Bound 3 %,
+    the acceptance value, for both and for the spread. With eq 34's count alone in the ground (no cone
+    test) the level read +2.0 % at 0.5 ms, +16.8 % at 0.25 ms and -15.5 % at 1 ms. At 0.25 ms the
+    column still bounces on the plug and, with two threads, lifts off it (+39 %; docs/isph.md, "Surface
+    test in the ground"): not tested until that is solved."""
+    devs = []
+    for dt, (t, dev, half, _) in permeameter_runs.items():
+        assert half.sum() > 20
+        assert np.max(np.abs(dev[half])) < 0.03, (dt, dev[half].min(), dev[half].max())
+        devs.append(dev[half])
+    n = min(len(d) for d in devs)
+    assert np.max(np.abs(devs[0][:n] - devs[1][:n])) < 0.03
+
+
+def test_permeameter_core_is_not_free_surface(permeameter_runs):
+    """The saturated plug's core (farther than r_e from its faces) holds no Dirichlet rows: the cone test
+    in the ground flags 0.0 / 0.1 % of it (time mean over frames) at dt 1 / 0.5 ms, against 26 % (dt
+    0.5 ms) with eq 34's count alone. Bound 1 %: a few particles at a time where the flow momentarily
+    opens a gap (each row of a Dirichlet particle is a sink its neighbours flow into)."""
+    for dt, (_, _, _, flagged) in permeameter_runs.items():
+        assert flagged < 0.01, (dt, flagged)
 
 
 def test_freefall_coarse_volume_and_fraction_in_layer(run_cli, tmp_path):

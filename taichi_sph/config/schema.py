@@ -267,6 +267,13 @@ class ISPH(Strict):
     #: 1996, beta = 0.97). The count alone also flags particles inside the water whose outermost
     #: lattice ring (8 of 20 neighbours in 2D at 2.24 dx, r_e = 2.4 dx) has moved out; 0 = count only
     surface_density: Annotated[float, Field(ge=0, le=1)] = 0.97
+    #: in and next to porous ground: a particle that eq 34's count (or, in free water, the plain
+    #: particle count) finds short of neighbours is free surface only if no neighbour lies in a cone
+    #: of this half-angle (degrees) about its outward normal, -sum_j V_j grad W_ij (the scan-region
+    #: test of Marrone et al. 2010). The count alone misreads the sparse, disordered pore water and
+    #: flags a quarter to half of a saturated plug (docs/isph.md, "Surface test in the ground");
+    #: 45 deg still flags enough of it to go unstable at dt 0.25 ms; 0 = count only
+    ground_surface_cone: Annotated[float, Field(ge=0, lt=90)] = 60.0
     #: pressure gradient: eq 12 difference form with kernel-gradient correction (default),
     #: plain eq 12, or the symmetric eq 13 form
     gradient: Literal["corrected", "difference", "symmetric"] = "corrected"

@@ -66,6 +66,19 @@ def falling_head_level(h0, length, eps, d50, t_end, nu=1.0e-6, g=9.81, alpha_c=1
     return lambda t: sol(t)[0]
 
 
+def column_level(z, base, dx):
+    """Height above `base` of the free surface of a water column whose particles sit at heights z: the
+    mean height of its top row (within dx / 2 of the highest particle) plus dx / 2, the top of those
+    particles; 0 when no particle is above base. The measure the falling-head reference compares with
+    (a count of the particles above base moves in steps of a row as the column crosses base)."""
+    z = np.asarray(z, dtype=float)
+    z = z[z > base]
+    if z.size == 0:
+        return 0.0
+    top = z[z > z.max() - 0.5 * dx]
+    return max(float(top.mean()) + 0.5 * dx - base, 0.0)
+
+
 def lattice_table(dim: int, n: int = 96, eps_min: float = 0.05) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For water in ground of porosity eps (pore lattice of spacing dx eps^(-1/dim)), tabulated on n
     porosities in [eps_min, 1]: the lattice kernel sum K(eps) and the lattice neighbour count
