@@ -356,12 +356,16 @@ class ISPHSolver(SolverCommon):
         the scan-region test of Marrone et al. (2010, J. Comput. Phys. 229), with the support as its reach.
         On a surface the half-space beyond it is empty whatever the arrangement; inside the ground a
         disordered pore lattice lowers the count (6-8 neighbours within r_e in 2D at eps 0.4) but leaves
-        no empty cone, so it is not flagged (docs/isph.md, "Surface test in the ground")."""
+        no empty cone, so it is not flagged (docs/isph.md, "Surface test in the ground"). A candidate with
+        at most dim water neighbours is free whatever its cone: a drop of a few particles hanging in a
+        corner of walls, which block its cone, would otherwise have no Dirichlet row (a singular block of
+        the PPE, on which CG diverged)."""
         for i in range(self.n):
             if self.solve_mask[i] == 1 and self.isolated[i] == 0:
                 xi = self.x[i]
                 near = self.eps[i] < 1.0
                 plain = 0.0
+                n_water = 0
                 gsum = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
@@ -370,6 +374,7 @@ class ISPHSolver(SolverCommon):
                     vj = self.mass / self.rho_w
                     if self.kind[j] == WATER:
                         vj = self.mass / (self.eps[j] * self.rho_w)
+                        n_water += 1
                         if self.eps[j] < 1.0:
                             near = True
                     plain += 1.0
@@ -388,7 +393,7 @@ class ISPHSolver(SolverCommon):
                         is_free = 1
                         for k in range(self.grid.nbr_count[i]):
                             j = self.grid.nbr[i, k]
-                            if self._present(j):
+                            if self._present(j) and n_water > self.dim:
                                 d = -operators.rel(xi, self.x[j], self.period)
                                 if d.dot(n_out) >= self.cone_cos * d.norm():
                                     is_free = 0
