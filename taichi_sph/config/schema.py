@@ -569,9 +569,11 @@ class Guard(Strict):
 
 class Checkpoint(Strict):
     """Restart points: the full solver state written to <run>.checkpoints/ beside the run file, read by
-    `taichi-sph resume RUN.h5`. An interrupted run (Ctrl-C, SIGINT) always writes one before it stops."""
+    `taichi-sph resume RUN.h5`. A run that completes always writes one at its end (so `taichi-sph resume
+    RUN.h5 --set end_time=...` extends any finished run), and an interrupted run (Ctrl-C, SIGINT) one
+    before it stops."""
 
-    #: simulated seconds between checkpoints; none: only when the run is interrupted
+    #: simulated seconds between checkpoints; none: only at the end of the run and when it is interrupted
     every: PosFloat | None = None
     #: how many of the newest checkpoints are kept (older ones are deleted)
     keep: PosInt = 2
