@@ -152,6 +152,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     step_wall = 0.0
     volume0 = 0.0
     limit_counts: dict[int, int] = {}  # steps bound by each dt limit (this process)
+    guard = None
     try:
         guard = StabilityGuard(cfg, scene.kind, _reference_density(solver, scene.kind), solver.max_speed_bound(),
                                scene.body, scene.motions)
@@ -248,6 +249,10 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             if stepper.fixed is None:
                 log.info("time-step limits that bound: %s",
                          ", ".join(f"{k} {100 * v:.1f} %" for k, v in share.items()))
+        if guard is not None:  # most water or air particles inside walls at one check (a resumed run: both parts)
+            most = max(guard.crossed_max, int(writer.file.attrs.get("wall_crossings_max", 0)))
+            summary["wall_crossings_max"] = most
+            writer.set_attrs(wall_crossings_max=most)
         writer.set_attrs(status=summary["status"], exit_reason=summary.get("error", ""), steps=steps,
                          wall_seconds=wall, step_seconds=step_wall, mipps=psps / 1e6,
                          removed_particles=solver.removed_total)

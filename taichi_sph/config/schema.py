@@ -549,12 +549,17 @@ class Neighbours(Strict):
 
 
 class Guard(Strict):
-    """Stability checks made every step."""
+    """Stability checks made every step (speed, non-finite state) and every `every` steps and frame (the
+    rest)."""
 
     #: stop when any speed exceeds this (m/s); default 20 sqrt(g H_domain)
     max_speed: Optional[PosFloat] = None
     #: particles leaving the domain: remove with a warning and count, or stop the run
     out_of_domain: Literal["remove", "error"] = "remove"
+    #: water or air particles inside a wall (past a tank side or into an obstacle by more than dx / 2), found
+    #: at the full checks: warn with their count whenever it changes (the run file's attribute
+    #: `wall_crossings_max` keeps the most at one check), or stop the run (exit 6, the particles flagged)
+    wall_crossing: Literal["warn", "error"] = "warn"
     #: full host-side check (non-finite state, density ratio, wall particles at rest) every this many steps
     #: and at every frame; speed and non-finite reductions are checked every step
     every: PosInt = 10
