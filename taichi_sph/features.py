@@ -1,10 +1,36 @@
-"""Which physics and options a config enables (what `taichi-sph info --config` prints)."""
+"""Which physics and options a config enables (what `taichi-sph info --config` prints). The physics
+switches come from taichi_sph/switches.py, the record the solvers set their compile-time flags from."""
 
 from __future__ import annotations
 
+import os
 
-def features(cfg) -> dict:
-    """A JSON-serialisable description of the physics a validated config compiles and runs."""
+from .switches import Switches
+
+#: Taichi prints its banner on stdout when first imported unless this variable says 0
+_TAICHI_BANNER = "ENABLE_TAICHI_HEADER_PRINT"
+
+
+def build_scene_quietly(cfg):
+    """The config's scene (scene.build_scene) without Taichi's banner on stdout: scene.py imports
+    Taichi through its kernels, and `info --json` prints nothing but JSON."""
+    before = os.environ.get(_TAICHI_BANNER)
+    os.environ[_TAICHI_BANNER] = "0"
+    try:
+        from .scene import build_scene
+    finally:
+        if before is None:
+            os.environ.pop(_TAICHI_BANNER, None)
+        else:
+            os.environ[_TAICHI_BANNER] = before
+    return build_scene(cfg)
+
+
+def features(cfg, scene=None) -> dict:
+    """A JSON-serialisable description of the physics a validated config compiles and runs; `scene`
+    (scene.build_scene of cfg) is built when not given. `switches` holds every compile-time physics
+    switch of the config's mode (Switches.report)."""
+    sw = Switches.build(cfg, scene if scene is not None else build_scene_quietly(cfg))
     return {
         "mode": cfg.mode,
         "dim": cfg.dim,
@@ -12,9 +38,9 @@ def features(cfg) -> dict:
         "dt": cfg.dt,
         "end_time": cfg.end_time,
         "physics": {
-            "viscosity": cfg.fluid.viscosity > 0,
-            "turbulence": cfg.fluid.turbulence,
-            "porous_ground": False,
+            "viscosity": sw.viscosity,
+            "turbulence": bool(sw.turbulence),
+            "porous_ground": bool(sw.porous),
             "walls": cfg.tank.boundary,
             "obstacles": len(cfg.obstacles),
             "gravity": cfg.gravity_vector(),
@@ -32,21 +58,22 @@ def features(cfg) -> dict:
         "probes": {p.name: {"type": p.type, "every": p.every or cfg.output.every} for p in cfg.probes},
         "images": (None if cfg.output.images is None else
                    {"every": cfg.output.images.every, "field": cfg.output.images.field}),
-        **_wcsph_features(cfg),
+        "switches": sw.report(),
+        **_wcsph_features(cfg, sw),
     }
 
 
-def _wcsph_features(cfg) -> dict:
-    """The physics switches of mode wcsph_biot (each a compile-time flag of its solver)."""
+def _wcsph_features(cfg, sw: Switches) -> dict:
+    """The options of mode wcsph_biot (its switches are under `switches`)."""
     if cfg.mode != "wcsph_biot":
         return {}
     w = cfg.wcsph
     return {"wcsph": {
-        "materials": ["water"] + (["air"] if cfg.air else []),
+        "materials": ["water"] + (["air"] if sw.air else []) + (["soil"] if sw.soil else []),
         "density": w.density,
         "normalise_every": w.normalise_every,
         "water_sound_speed": cfg.sound_speed(),
-        "artificial_viscosity": w.artificial_viscosity.alpha > 0 or w.artificial_viscosity.beta > 0,
+        "artificial_viscosity": sw.artificial_viscosity,
         "xsph": w.xsph,
         "variable_h": w.variable_h,
         "cohesion": {"water": w.water.cohesion, "air": w.air.cohesion},

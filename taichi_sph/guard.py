@@ -6,12 +6,14 @@ Causes and their families (exit codes in taichi_sph/errors.py):
   guard.max_density_ratio], neighbour-list overflow (`bounds`, exit 3);
 - pressure solver (CG) diverged or not converged, adaptive time step below timestep.min (`solver`, exit 5);
 - particles leaving the domain when guard.out_of_domain is `error` (else removed, counted, warned),
-  a wall particle that moved (`domain`, exit 6).
+  a wall particle that moved, water or air inside a wall when guard.wall_crossing is `error` (else
+  counted and warned) (`domain`, exit 6).
 
 Every message has the same shape: "step S, t = T s: <quantity> ... (particle ids ...)". The solvers call the
 `raise_*`/`*_error` helpers at the places they detect a cause inside a step (cheap reductions already in
 their kernels); the driver calls StabilityGuard.after_step every step (speed) and StabilityGuard.check_fields
-every guard.every steps and on every frame (the host-side checks: non-finite, density ratio, walls).
+every guard.every steps and on every frame (the host-side checks: non-finite, density ratio, walls at
+rest, fluid inside walls).
 """
 
 from __future__ import annotations
@@ -31,6 +33,11 @@ log = logging.getLogger("taichi_sph")
 DEFAULT_MAX_DENSITY_RATIO = {"wcsph_biot": 1.3, "isph": 3.0}
 #: a wall particle counts as moved beyond this fraction of dx (walls are never integrated: exact zero)
 WALL_TOLERANCE = 1.0e-6
+#: a water or air particle is inside a wall once its centre is past the wall's face (the tank interior's
+#: side, an obstacle's box) by more than this fraction of dx: past the centres of the wall's first layer
+#: (half a spacing behind the face). Deepest past a face over whole runs (frames): dam break isph
+#: (configs/dambreak.yaml) 0.004 dx, dam break wcsph_biot at dx = a / 20 0.42 dx, breakwater 0
+WALL_CROSSING_DEPTH = 0.5
 
 
 def where(step: int, time: float) -> str:
@@ -101,6 +108,11 @@ class StabilityGuard:
             self.periodic = [ax for ax in cfg.tank.periodic if ax < cfg.dim]
             self.tank_size = list(cfg.tank.size)
         self.wall_body = np.asarray(body)[self.wall] if body is not None else np.full(int(self.wall.sum()), -1)
+        self.walls = WallFaces(cfg, self.motions)
+        self.crossing_action = g.wall_crossing
+        #: water or air particles inside a wall at the last check, and the most at any check of this process
+        self.crossed = 0
+        self.crossed_max = 0
 
     def _wall_displacement(self, time: float) -> np.ndarray:
         """Where the motions have moved each wall particle by `time` (zero for fixed walls)."""
@@ -131,7 +143,8 @@ class StabilityGuard:
                 family="bounds" if math.isfinite(speed) else "nonfinite")
 
     def check_fields(self, step: int, time: float, fields: dict) -> None:
-        """Non-finite state, density ratio of fluid particles, walls at rest (fields in id order)."""
+        """Non-finite state, density ratio of fluid particles, walls at rest, fluid inside walls (fields in
+        id order)."""
         active = np.asarray(fields["active"], dtype=bool)
         bad = np.zeros(len(active), dtype=bool)
         for name in ("position", "velocity", "pressure", "density"):
@@ -169,6 +182,78 @@ class StabilityGuard:
                     f"{where(step, time)}: {len(ids)} wall particle(s) moved (particle ids {ids_text(ids)})"
                     + (" off their prescribed motion" if self.motions else ""),
                     step=step, time=time, quantity="wall position", particles=ids, family="domain")
+        self.check_wall_crossing(step, time, fields)
+
+    def check_wall_crossing(self, step: int, time: float, fields: dict) -> None:
+        """Count the active water and air particles inside a wall (WallFaces.depth > WALL_CROSSING_DEPTH dx):
+        stop the run when guard.wall_crossing is `error`, else warn whenever the count changes."""
+        check = np.asarray(fields["active"], dtype=bool) & self.fluid
+        depth = np.zeros(len(check))
+        if check.any():
+            depth[check] = self.walls.depth(np.asarray(fields["position"], dtype=float)[check], time)
+        inside = check & (depth > WALL_CROSSING_DEPTH * self.walls.dx)
+        count = int(inside.sum())
+        changed, self.crossed = count != self.crossed, count
+        self.crossed_max = max(self.crossed_max, count)
+        if not count:
+            return
+        ids = np.flatnonzero(inside)
+        msg = (f"{where(step, time)}: {count} water or air particle(s) inside a wall, up to "
+               f"{depth[ids].max() / self.walls.dx:.3g} dx past its face (particle ids {ids_text(ids)})")
+        if self.crossing_action == "error":
+            raise InstabilityError(msg + " (guard.wall_crossing: error)", step=step, time=time,
+                                   quantity="wall crossing", particles=ids, family="domain")
+        if changed:
+            log.warning("%s", msg)
+
+
+class WallFaces:
+    """Where the walls of a config are: the tank's sides around its interior [0, size] (none across a
+    periodic axis, none on top of an open tank) and the obstacles' boxes, each moved by its prescribed
+    motion (the motions in the scene's order: the obstacles with a `motion`, in config order)."""
+
+    def __init__(self, cfg, motions=()):
+        self.dx = float(cfg.dx)
+        self.size = np.asarray(cfg.tank.size, dtype=float)
+        dim = len(self.size)
+        self.periodic = [ax for ax in cfg.tank.periodic if ax < dim]
+        #: (axis, has a wall below, has a wall above) for the axes that are not periodic
+        self.sides = [(ax, True, not (ax == dim - 1 and cfg.tank.open_top)) for ax in range(dim)
+                      if ax not in self.periodic]
+        self.motions = list(motions)
+        self.boxes = []  # (min, max, index into motions or -1)
+        moving = 0
+        for box in getattr(cfg, "obstacles", []):
+            body = -1
+            if box.motion is not None:
+                body, moving = moving, moving + 1
+            self.boxes.append((np.asarray(box.min, dtype=float), np.asarray(box.max, dtype=float), body))
+
+    def depth(self, pos: np.ndarray, time: float) -> np.ndarray:
+        """How far past a wall face each point is (m; 0 where it is in the open): beyond a side of the tank,
+        or inside an obstacle's box by its distance to the nearest face."""
+        out = np.zeros(len(pos))
+        for ax, below, above in self.sides:
+            if below:
+                out = np.maximum(out, -pos[:, ax])
+            if above:
+                out = np.maximum(out, pos[:, ax] - self.size[ax])
+        for lo, hi, body in self.boxes:
+            if body >= 0:
+                shift = np.asarray(self.motions[body].displacement(time), dtype=float)
+                lo, hi = lo + shift, hi + shift
+            inner = np.full(len(pos), np.inf)  # distance to the nearest face, where inside
+            for ax in range(len(lo)):
+                width = hi[ax] - lo[ax]
+                u = pos[:, ax] - lo[ax]
+                if ax in self.periodic:
+                    L = float(self.size[ax])
+                    if width >= L * (1 - 1e-9):  # the box spans the period: no face along this axis
+                        continue
+                    u = np.mod(u, L)
+                inner = np.minimum(inner, np.where((u > 0) & (u < width), np.minimum(u, width - u), -np.inf))
+            out = np.maximum(out, np.where(np.isfinite(inner) & (inner > 0), inner, 0.0))
+        return out
 
 
 def flag_field(n: int, ids=()) -> np.ndarray:

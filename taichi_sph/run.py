@@ -152,6 +152,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     step_wall = 0.0
     volume0 = 0.0
     limit_counts: dict[int, int] = {}  # steps bound by each dt limit (this process)
+    guard = None
     try:
         guard = StabilityGuard(cfg, scene.kind, _reference_density(solver, scene.kind), solver.max_speed_bound(),
                                scene.body, scene.motions)
@@ -171,6 +172,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             extras.resume(saved)
             volume0, next_out, t, last = saved["volume0"], saved["next_out"], saved["t"], saved["last"]
             checkpoints.next = saved["next_checkpoint"]
+            checkpoints.last_step = solver.step_count  # the checkpoint it resumed from
         summary["compile_and_setup_seconds"] = _time.perf_counter() - t_compile
         n_fixed = None if stepper.fixed is None or propose is not None else int(round(cfg.end_time / stepper.fixed))
         checkpoints.catch_sigint()
@@ -211,6 +213,9 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                     raise KeyboardInterrupt
             progress_bar.update(t, solver.step_count / max(step_wall, 1e-9),
                                 f", CG {last['cg_iterations']}" if "cg_iterations" in last else f", dt {dt:.3g} s")
+        if checkpoints.last_step != solver.step_count:  # every finished run can go on (`taichi-sph resume`)
+            _flush_diag(writer, diag)
+            checkpoints.write(t, {"t": t, "next_out": next_out, "last": last, "volume0": volume0})
         summary["status"] = "completed"
     except InstabilityError as exc:
         summary["status"] = "unstable"
@@ -244,6 +249,10 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             if stepper.fixed is None:
                 log.info("time-step limits that bound: %s",
                          ", ".join(f"{k} {100 * v:.1f} %" for k, v in share.items()))
+        if guard is not None:  # most water or air particles inside walls at one check (a resumed run: both parts)
+            most = max(guard.crossed_max, int(writer.file.attrs.get("wall_crossings_max", 0)))
+            summary["wall_crossings_max"] = most
+            writer.set_attrs(wall_crossings_max=most)
         writer.set_attrs(status=summary["status"], exit_reason=summary.get("error", ""), steps=steps,
                          wall_seconds=wall, step_seconds=step_wall, mipps=psps / 1e6,
                          removed_particles=solver.removed_total)
@@ -416,8 +425,11 @@ class RunExtras:
 
 class Checkpoints:
     """Checkpoints of a run (config section `checkpoint`, io/checkpoint.py): due every `every` simulated
-    seconds and whenever SIGINT has asked the run to stop. Each holds the solver's `state()` and the
-    step loop's own state, after the run file has been flushed up to that moment."""
+    seconds and whenever SIGINT has asked the run to stop; the driver writes one more at the end of a
+    completed run (unless one was just written there), so any finished run can be resumed with a later
+    end_time. Each holds the solver's `state()` and the step loop's own state, after the run file has
+    been flushed up to that moment. `last_step` is the solver step of the newest one this process wrote
+    (None before the first)."""
 
     def __init__(self, cfg, out_path, solver, writer, extras):
         self.every = cfg.checkpoint.every
@@ -426,6 +438,7 @@ class Checkpoints:
         self.out_path = out_path
         self.solver, self.writer, self.extras = solver, writer, extras
         self.interrupted = False
+        self.last_step = None
         self._previous_handler = None
 
     def catch_sigint(self) -> None:
@@ -467,6 +480,7 @@ class Checkpoints:
                       n_diagnostics=int(diag["time"].shape[0]) if "time" in diag else 0,
                       **self.extras.probe_state())
         path = write_checkpoint(self.out_path, self.solver.step_count, t, self.solver.state(), driver, self.keep)
+        self.last_step = self.solver.step_count
         log.info("checkpoint at t = %.6g s (step %d): %s", t, self.solver.step_count, path)
         return path
 

@@ -1,5 +1,6 @@
 """Checkpoints, resume and kill-safety: a run stopped at half time and resumed equals the
-uninterrupted run bit for bit (one CPU thread, both modes); SIGKILL leaves a readable run file with
+uninterrupted run bit for bit (one CPU thread, both modes), whether it stopped at a periodic checkpoint
+or at the checkpoint every finished run leaves at its end; SIGKILL leaves a readable run file with
 every frame flushed before the kill, and the run resumes from its last checkpoint; SIGINT stops
 after writing a checkpoint."""
 
@@ -61,6 +62,32 @@ def test_resume_equals_uninterrupted_run(run_cli, tmp_path, mode):
     _same_runs(full, half)
     csv_full = full.with_suffix(".probes.csv").read_text()
     assert half.with_suffix(".probes.csv").read_text() == csv_full
+
+
+@pytest.mark.parametrize("mode", ["isph", "wcsph_biot"])
+def test_finished_run_resumes_without_checkpoint_every(run_cli, tmp_path, mode):
+    """A run without `checkpoint.every` leaves one checkpoint at its end; `resume --set end_time=...`
+    continues its frames to the later end time and gives one straight run to that time, bit for bit
+    (one thread: the same arithmetic in the same order, see TANK)."""
+    args = (*TANK, "--set", f"mode={mode}")
+    full, half = tmp_path / "full.h5", tmp_path / "half.h5"
+    proc = run_cli(*args, "--set", "end_time=0.2", "--out", full)
+    assert proc.returncode == 0, proc.stderr
+    proc = run_cli(*args, "--set", "end_time=0.1", "--out", half)
+    assert proc.returncode == 0, proc.stderr
+    found = list_checkpoints(half)
+    assert len(found) == 1, found
+    with RunFile(half) as rf:
+        assert found[0].name == f"step_{int(rf.attrs['steps']):010d}.h5"  # the run's last step
+        np.testing.assert_allclose(rf.times, 0.05 * np.arange(3), rtol=0, atol=1e-12)
+    proc = run_cli("resume", half, "--set", "end_time=0.2", "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    with RunFile(half) as rf:
+        # the frames go on at output.every up to the new end time (times are sums of dt: round-off only)
+        np.testing.assert_allclose(rf.times, 0.05 * np.arange(5), rtol=0, atol=1e-12)
+        assert rf.diagnostics()["time"][-1] == pytest.approx(0.2, rel=1e-12)
+    _same_runs(full, half)
+    assert len(list_checkpoints(half)) == 2  # the first run's end and the resumed run's end (keep: 2)
 
 
 def _start(out, *extra):
@@ -126,6 +153,8 @@ def test_resume_without_checkpoint_is_an_input_error(run_cli, tmp_path):
     out = tmp_path / "plain.h5"
     proc = run_cli(*TANK, "--set", "end_time=0.01", "--set", "output.every=0.01", "--out", out)
     assert proc.returncode == 0, proc.stderr
+    for path in list_checkpoints(out):  # the one a finished run leaves at its end
+        path.unlink()
     proc = run_cli("resume", out)
     assert proc.returncode == 2
     assert "no checkpoint to resume from" in proc.stderr and proc.stderr.count("\n") == 1

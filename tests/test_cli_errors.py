@@ -201,6 +201,7 @@ CASES = [
     case("resume-missing-run-file", ["resume", "{tmp}/nothere.h5"], ["nothere.h5"]),
     case("metric-unknown-probe", ["--set", "metrics=[{name: m, probe: nowhere}]"], ["metrics[0].probe", "nowhere"]),
     case("checkpoint-keep-zero", ["--set", "checkpoint.keep=0"], ["checkpoint.keep"]),
+    case("guard-wall-crossing-unknown", ["--set", "guard.wall_crossing=stop"], ["guard.wall_crossing"]),
     case("info-without-input", ["info"], ["info"]),
     case("info-missing-run-file", ["info", "{tmp}/nothere.h5"], ["nothere.h5"]),
     case("info-not-hdf5", ["info", "{tmp}/fake.h5"], ["fake.h5", "not an HDF5 file"],

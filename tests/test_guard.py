@@ -17,8 +17,10 @@ RHO_REF = np.array([1000.0, 1000.0, 1000.0, 1000.0, 1000.0, 1.2])
 
 
 def _cfg(**guard):
-    g = {"every": 1, "max_density_ratio": 1.5, "min_density_ratio": None, "out_of_domain": "remove"} | guard
-    return SimpleNamespace(dx=0.01, mode="isph", guard=SimpleNamespace(**g))
+    g = {"every": 1, "max_density_ratio": 1.5, "min_density_ratio": None, "out_of_domain": "remove",
+         "wall_crossing": "warn"} | guard
+    return SimpleNamespace(dx=0.01, mode="isph", dim=2, guard=SimpleNamespace(**g), obstacles=[],
+                           tank=SimpleNamespace(size=[1.0, 1.0], periodic=[], open_top=True))
 
 
 def _fields(n=6):
@@ -93,7 +95,6 @@ def test_wall_of_a_moving_obstacle_must_follow_its_motion():
     body[4] = 0
     motion = Motion(start=0.1, stop=np.inf, velocity=np.array([0.5, 0.0]))
     cfg = _cfg()
-    cfg.tank, cfg.dim = SimpleNamespace(periodic=[], size=[1.0, 1.0]), 2
     g = StabilityGuard(cfg, KIND, RHO_REF, speed_bound=5.0, body=body, motions=[motion])
     g.start(_fields())
     f = _fields()
@@ -104,6 +105,84 @@ def test_wall_of_a_moving_obstacle_must_follow_its_motion():
     resumed = StabilityGuard(cfg, KIND, RHO_REF, speed_bound=5.0, body=body, motions=[motion])
     resumed.start(f, 0.3)
     resumed.check_fields(9, 0.3, f)
+
+
+def _box(lo, hi, motion=None):
+    return SimpleNamespace(min=lo, max=hi, motion=motion)
+
+
+@pytest.mark.parametrize("where_to, inside", [
+    # past the floor (the tank's interior is [0, 1] x [0, 1], dx = 1 cm) by 0.6 dx: inside the wall
+    ((0.5, -0.006), True),
+    # 0.4 dx past the floor: within the first half spacing, where the wall's first layer begins
+    ((0.5, -0.004), False),
+    ((-0.02, 0.5), True),  # the left side
+    ((1.007, 0.5), True),  # the right side
+    ((0.5, 1.5), False),  # above an open tank: in the open
+    ((0.33, 0.33), True),  # inside the obstacle [0.3, 0.4] x [0.3, 0.4], 3 dx from its nearest faces
+    ((0.304, 0.35), False),  # 0.4 dx into it
+])
+def test_fluid_inside_a_wall_is_counted_and_warned(caplog, where_to, inside):
+    """A water particle put past a wall's face is counted in a one-line warning naming the step, how many
+    and their ids; with guard.wall_crossing: error it stops the run (exit 6) with the particle flagged.
+    A wall's first layer of particle centres lies half a spacing behind its face (scene.tank_walls)."""
+    cfg = _cfg()
+    cfg.obstacles = [_box([0.3, 0.3], [0.4, 0.4])]
+    g = StabilityGuard(cfg, KIND, RHO_REF, speed_bound=5.0)
+    g.start(_fields())
+    f = _fields()
+    f["position"][1] = where_to
+    with caplog.at_level("WARNING", logger="taichi_sph"):
+        g.check_fields(12, 0.25, f)
+    assert g.crossed == int(inside)
+    lines = [r.getMessage() for r in caplog.records]
+    if not inside:
+        assert not lines
+        return
+    assert lines == [lines[0]] and "\n" not in lines[0]
+    assert lines[0].startswith("step 12, t = 0.25 s: 1 water or air particle(s) inside a wall")
+    assert "(particle ids 1)" in lines[0]
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="taichi_sph"):
+        g.check_fields(13, 0.26, f)  # the same count: not repeated
+    assert not caplog.records and g.crossed_max == 1
+    g.check_fields(14, 0.27, _fields())
+    assert g.crossed == 0 and g.crossed_max == 1
+    cfg = _cfg(wall_crossing="error")
+    cfg.obstacles = [_box([0.3, 0.3], [0.4, 0.4])]
+    g = StabilityGuard(cfg, KIND, RHO_REF, speed_bound=5.0)
+    g.start(_fields())
+    exc = _raised(lambda: g.check_fields(12, 0.25, f))
+    assert exc.exit_code == 6 and exc.family == "domain" and exc.particles == [1]
+    assert exc.quantity == "wall crossing" and "guard.wall_crossing: error" in str(exc)
+
+
+def test_inside_a_wall_counts_water_and_air_only():
+    f = _fields()
+    f["position"][[0, 5]] = (0.5, -0.02)  # water and air under the floor
+    f["position"][3] = (0.5, -0.005)  # a wall particle, where walls are
+    f["active"][0] = False  # removed: not counted
+    g = StabilityGuard(_cfg(), KIND, RHO_REF, speed_bound=5.0)
+    g.start(f)  # (the walls at rest where they are)
+    g.check_fields(3, 0.1, f)
+    assert g.crossed == 1  # the air particle
+
+
+def test_inside_a_moving_or_periodic_obstacle():
+    """A moving obstacle's box goes with its motion; across a periodic axis the box wraps, and a box that
+    spans a periodic axis has no faces along it."""
+    motion = Motion(start=0.0, stop=np.inf, velocity=np.array([1.0, 0.0]))
+    cfg = _cfg()
+    cfg.tank.periodic = [0]
+    # a plate moving along the periodic x axis at 1 m/s, and a wall spanning x at the bottom of the tank
+    cfg.obstacles = [_box([0.8, 0.3], [0.9, 0.4], motion), _box([0.0, 0.45], [1.0, 0.5])]
+    from taichi_sph.guard import WallFaces
+
+    walls = WallFaces(cfg, [motion])
+    pts = np.array([[0.85, 0.35], [0.05, 0.35], [0.5, 0.475], [-0.3, 0.475], [1.3, 0.2]])
+    # at t = 0.2 s the plate covers x in [1.0, 1.1], i.e. [0, 0.1] after the wrap
+    d = walls.depth(pts, 0.2)
+    np.testing.assert_allclose(d, [0.0, 0.05, 0.025, 0.025, 0.0], atol=1e-12)
 
 
 def test_speed_bound_and_nan_speed():

@@ -113,7 +113,11 @@ def test_roundtrip_spec_names(tmp_path, dim):
         assert fr["position"].shape == (F, N, dim) and fr["velocity"].shape == (F, N, dim)
         for name in ("pressure", "density", "active", "porosity"):
             assert fr[name].shape == (F, N), name
-        assert fr["active"].dtype == np.uint8 and fr["active"].attrs["dtype"] == "bool"
+        # /frames/active is an HDF5 boolean (docs/output.md): h5py's enum FALSE = 0 / TRUE = 1 of int8
+        assert fr["active"].dtype == np.bool_ and "dtype" not in fr["active"].attrs
+        tid = fr["active"].id.get_type()
+        assert tid.get_class() == h5py.h5t.ENUM and tid.get_size() == 1
+        assert fr["active"][()].dtype == np.bool_
         assert fr["position"].maxshape[0] is None and fr["position"].chunks == (1, N, dim)
         units = {k: fr[k].attrs["units"] for k in fr}
         assert units["time"] == "s" and units["position"] == "m" and units["velocity"] == "m/s"
@@ -310,6 +314,51 @@ def test_killed_writer_leaves_frames_readable(tmp_path):
         assert run.frame(1)["active"].all()
         assert run.diagnostics()["dt"].shape == (2,)
     assert write_xdmf(path).exists()
+
+
+def test_booleans_read_as_0_1_by_an_xdmf_reader(tmp_path):
+    """VTK's XDMF reader (what ParaView opens the sidecar with) asks HDF5 for unsigned chars and gets
+    the booleans of /frames/active as 0 / 1, frame by frame."""
+    vtk = pytest.importorskip("vtk")
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    rng = np.random.default_rng(4)
+    path = tmp_path / "b.h5"
+    _, written, _ = _write_run(path, 2, rng)
+    reader = vtk.vtkXdmfReader()
+    reader.SetFileName(str(write_xdmf(path)))
+    reader.UpdateInformation()
+    for i, t in enumerate([0.0, 0.1, 0.2]):
+        reader.GetOutputInformation(0).Set(vtk.vtkStreamingDemandDrivenPipeline.UPDATE_TIME_STEP(), t)
+        reader.Update()
+        out = reader.GetOutputDataObject(0)
+        grid = out.GetBlock(0) if out.IsA("vtkMultiBlockDataSet") else out
+        got = vtk_to_numpy(grid.GetPointData().GetArray("active"))
+        np.testing.assert_array_equal(got, written[i]["active"].astype(np.uint8))
+
+
+def test_booleans_of_earlier_files_read_and_resume(tmp_path):
+    """Files of earlier versions hold booleans as uint8 with attribute dtype = "bool": they read as bool,
+    and a resumed run appends to them in their own dtype."""
+    path = tmp_path / "old.h5"
+    n = 4
+    with RunWriter(path, mode="isph", dim=2, dx=0.01, arch="cpu", config_yaml="dim: 2", kind=np.zeros(n, np.int8),
+                   ids=np.arange(n), code_version="t") as w:
+        w.write_frame(0.0, {"position": np.zeros((n, 2)), "active": np.ones(n, bool)})
+    with h5py.File(path, "r+") as f:  # rewrite /frames/active the old way
+        del f["frames/active"]
+        ds = f["frames"].create_dataset("active", data=np.ones((1, n), np.uint8), maxshape=(None, n), chunks=(1, n))
+        ds.attrs["dtype"] = "bool"
+        ds.attrs["units"] = "1"
+    w = RunWriter.reopen(path, n_frames=1, n_diagnostics=0, probe_samples={})
+    w.write_frame(0.1, {"position": np.zeros((n, 2)), "active": np.array([True, False, True, False])})
+    w.close()
+    with RunFile(path) as run:
+        assert run.frame(1)["active"].dtype == np.bool_
+        np.testing.assert_array_equal(run.field("active", 1), [True, False, True, False])
+        assert run.summary()["frames"]["active"]["dtype"] == "bool"
+    with h5py.File(path, "r") as f:
+        assert f["frames/active"].dtype == np.uint8
 
 
 def test_writer_closed_and_reader_on_live_file(tmp_path):

@@ -556,12 +556,17 @@ class Neighbours(Strict):
 
 
 class Guard(Strict):
-    """Stability checks made every step."""
+    """Stability checks made every step (speed, non-finite state) and every `every` steps and frame (the
+    rest)."""
 
     #: stop when any speed exceeds this (m/s); default 20 sqrt(g H_domain)
     max_speed: Optional[PosFloat] = None
     #: particles leaving the domain: remove with a warning and count, or stop the run
     out_of_domain: Literal["remove", "error"] = "remove"
+    #: water or air particles inside a wall (past a tank side or into an obstacle by more than dx / 2), found
+    #: at the full checks: warn with their count whenever it changes (the run file's attribute
+    #: `wall_crossings_max` keeps the most at one check), or stop the run (exit 6, the particles flagged)
+    wall_crossing: Literal["warn", "error"] = "warn"
     #: full host-side check (non-finite state, density ratio, wall particles at rest) every this many steps
     #: and at every frame; speed and non-finite reductions are checked every step
     every: PosInt = 10
@@ -576,9 +581,11 @@ class Guard(Strict):
 
 class Checkpoint(Strict):
     """Restart points: the full solver state written to <run>.checkpoints/ beside the run file, read by
-    `taichi-sph resume RUN.h5`. An interrupted run (Ctrl-C, SIGINT) always writes one before it stops."""
+    `taichi-sph resume RUN.h5`. A run that completes always writes one at its end (so `taichi-sph resume
+    RUN.h5 --set end_time=...` extends any finished run), and an interrupted run (Ctrl-C, SIGINT) one
+    before it stops."""
 
-    #: simulated seconds between checkpoints; none: only when the run is interrupted
+    #: simulated seconds between checkpoints; none: only at the end of the run and when it is interrupted
     every: PosFloat | None = None
     #: how many of the newest checkpoints are kept (older ones are deleted)
     keep: PosInt = 2

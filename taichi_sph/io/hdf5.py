@@ -7,8 +7,10 @@ Layout (the names are fixed, other tools read them):
 - ``/particles/kind`` (N,) int8 (0 water, 1 wall, 2 soil, 3 air), ``/particles/id`` (N,).
 - ``/markers/position`` (M, dim), ``/markers/porosity`` (M,), ``/markers/d50`` (M,) when given.
 - ``/frames/time`` (F,) and ``/frames/<field>`` (F, N, ...), one chunk per frame, resizable along
-  the frame axis, attribute ``units`` on each.  Boolean fields are stored as uint8 with attribute
-  ``dtype = "bool"`` (so XDMF readers can reference them); :class:`RunFile` converts them back.
+  the frame axis, attribute ``units`` on each.  Boolean fields (``active``, ``free_surface``, ...) are
+  stored as HDF5 booleans (h5py's enum of int8, FALSE = 0 / TRUE = 1: numpy bool in h5py, and 0 / 1
+  to a reader that asks HDF5 for unsigned chars, as the XDMF sidecar does). Files written before
+  held them as uint8 with attribute ``dtype = "bool"``; :class:`RunFile` reads both as bool.
 - ``/diagnostics/<name>`` (S,) one row per step, attribute ``units``.
 - ``/probes/<name>/time`` (k,) and ``/probes/<name>/value`` (k,) or (k, m), attribute ``units``.
 
@@ -233,14 +235,12 @@ def _check_name(name: str, what: str) -> None:
         raise ValueError(f"invalid {what} name {name!r}: a non-empty string without '/'")
 
 
-def _storable(name: str, arr: Any) -> tuple[np.ndarray, bool]:
-    """Array as stored in HDF5 (bool -> uint8) and whether it was boolean."""
+def _storable(name: str, arr: Any) -> np.ndarray:
+    """Array as stored in HDF5: numbers, or booleans (h5py writes them as HDF5 booleans)."""
     a = np.asarray(arr)
-    if a.dtype == np.bool_:
-        return a.astype(np.uint8), True
     if a.dtype.kind not in "biuf":
         raise ValueError(f"field {name!r}: unsupported dtype {a.dtype} (numbers or booleans only)")
-    return a, False
+    return a
 
 
 def _append_rows(ds: h5py.Dataset, rows: np.ndarray) -> None:
@@ -437,13 +437,11 @@ class RunWriter:
         g = f.create_group("markers")
         for name, arr in markers.items():
             _check_name(name, "marker")
-            a, was_bool = _storable(f"markers/{name}", arr)
+            a = _storable(f"markers/{name}", arr)
             if a.ndim == 0 or a.shape[0] != m:
                 raise ValueError(f"markers {name!r}: first dimension must be M = {m}, got shape {a.shape}")
             ds = g.create_dataset(name, data=a)
             ds.attrs["units"] = self._unit(name)
-            if was_bool:
-                ds.attrs["dtype"] = "bool"
 
     # -- frames -------------------------------------------------------------------------------
     def write_frame(self, time: float, fields: Mapping[str, np.ndarray]) -> int:
@@ -474,9 +472,9 @@ class RunWriter:
                 )
 
         # validate everything before touching the file, so a bad call leaves no partial frame
-        data: dict[str, tuple[np.ndarray, bool]] = {}
+        data: dict[str, np.ndarray] = {}
         for name in names:
-            a, was_bool = _storable(name, fields[name])
+            a = _storable(name, fields[name])
             if a.ndim == 0 or a.shape[0] != self.n_particles:
                 raise ValueError(
                     f"field {name!r}: first dimension must be N = {self.n_particles}, got shape {a.shape}"
@@ -489,22 +487,23 @@ class RunWriter:
                     raise ValueError(
                         f"field {name!r}: shape {a.shape} differs from the first frame {ds.shape[1:]}"
                     )
-            data[name] = (a, was_bool)
+            data[name] = a
 
         g = f["frames"]
         if self._frame_names is None:
-            for name, (a, was_bool) in data.items():
+            for name, a in data.items():
                 ds = _create_growing(g, name, a.shape, a.dtype, 1, self.compression)
                 ds.attrs["units"] = self._unit(name)
-                if was_bool:
-                    ds.attrs["dtype"] = "bool"
             dt_ = _create_growing(g, "time", (), np.float64, 1024, None)
             dt_.attrs["units"] = "s"
             self._frame_names = names
 
         i = self._n_frames
-        for name, (a, _) in data.items():
-            _append_rows(g[name], a[None, ...])
+        for name, a in data.items():
+            ds = g[name]
+            if a.dtype == np.bool_ and ds.dtype != np.bool_:  # a file of an earlier version resumed: uint8
+                a = a.astype(ds.dtype)
+            _append_rows(ds, a[None, ...])
         # time last: a frame counts once its time is written
         _append_rows(g["time"], np.asarray([float(time)], dtype=np.float64))
         self._n_frames = i + 1
@@ -526,7 +525,7 @@ class RunWriter:
         length: int | None = None
         for name in names:
             _check_name(name, "diagnostics column")
-            a, was_bool = _storable(name, np.atleast_1d(np.asarray(columns[name])))
+            a = _storable(name, np.atleast_1d(np.asarray(columns[name])))
             if a.ndim != 1:
                 raise ValueError(f"diagnostics column {name!r}: must be 1D, got shape {a.shape}")
             if length is None:
@@ -565,7 +564,7 @@ class RunWriter:
         f = self._require_open()
         _check_name(name, "probe")
         t = np.atleast_1d(np.asarray(times, dtype=np.float64))
-        v, _ = _storable(name, np.asarray(values))
+        v = _storable(name, np.asarray(values))
         if v.ndim == 0:
             v = v.reshape(1)
         if t.ndim != 1:
@@ -630,9 +629,14 @@ class RunWriter:
 # reader
 
 
+def _is_bool(ds: h5py.Dataset) -> bool:
+    """An HDF5 boolean (numpy bool in h5py), or the uint8 with attribute dtype = "bool" of earlier files."""
+    return ds.dtype == np.bool_ or ds.attrs.get("dtype") in ("bool", b"bool")
+
+
 def _read(ds: h5py.Dataset, sel: Any = ()) -> np.ndarray:
     a = np.asarray(ds[sel])
-    if ds.attrs.get("dtype") in ("bool", b"bool"):
+    if a.dtype != np.bool_ and _is_bool(ds):
         a = a.astype(bool)
     return a
 
@@ -858,7 +862,7 @@ class RunFile:
             frames[name] = {
                 "shape": [n, *map(int, ds.shape[1:])],
                 "units": str(_py(ds.attrs.get("units", "1"))),
-                "dtype": "bool" if _py(ds.attrs.get("dtype")) == "bool" else str(ds.dtype),
+                "dtype": "bool" if _is_bool(ds) else str(ds.dtype),
             }
 
         diag = self.diagnostics()

@@ -99,8 +99,8 @@ def write_xdmf(h5_path: str | Path, xdmf_path: str | Path | None = None, *, mark
 
     Default location: ``<run>.xdmf`` beside the HDF5 file.  One Uniform Grid per frame in a
     temporal collection: Polyvertex topology over all N particles, geometry ``XYZ`` (3D) or
-    ``XY`` (2D) from ``/frames/position``, one node Attribute per frame field (booleans stored as
-    uint8) plus ``kind`` and ``id`` from ``/particles``.  With ``markers=True`` and soil markers
+    ``XY`` (2D) from ``/frames/position``, one node Attribute per frame field (booleans read as
+    unsigned chars 0 / 1) plus ``kind`` and ``id`` from ``/particles``.  With ``markers=True`` and soil markers
     in the file, a second (static) grid ``markers`` carries porosity and d50.
     """
     h5_path = Path(h5_path)

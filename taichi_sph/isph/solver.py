@@ -69,23 +69,27 @@ class ISPHSolver(SolverCommon):
         self.n_surf = cfg.n_surf()
         self.p_surface = 0.5 * self.rho_w * self.g_abs * dx if cfg.isph.free_surface_pressure == "half_layer" else 0.0
         self.surface_density = cfg.isph.surface_density
-        # ti.static switches: a scene compiles only what it uses
-        self.turbulence = cfg.fluid.turbulence == "smagorinsky"
-        self.no_slip = cfg.tank.boundary == "no_slip"
-        self.grad_mode = _GRAD[cfg.isph.gradient]
-        self.pore_advection = cfg.isph.advection == "pore"
+        # ti.static switches: a scene compiles only what it uses (taichi_sph/switches.py, also what
+        # `taichi-sph info --config` reports)
+        from ..switches import Switches
+
+        self.switches = sw = Switches.build(cfg, scene)
+        self.turbulence = sw.turbulence
+        self.no_slip = sw.no_slip
+        self.grad_mode = _GRAD[sw.gradient]
+        self.pore_advection = sw.pore_advection
         # porous ground only when the scene has soil markers (ti.static: otherwise compiled out)
-        self.porous = bool(scene.markers)
+        self.porous = sw.porous
         self.alpha_c = cfg.soil.alpha_c
         self.beta_c = cfg.soil.beta_c
         # surface test in and next to the ground: the count's candidates confirmed by an empty cone
-        self.ground_cone = self.porous and cfg.isph.ground_surface_cone > 0.0
+        self.ground_cone = sw.ground_cone
         self.cone_cos = math.cos(math.radians(cfg.isph.ground_surface_cone))
-        self.shifting = cfg.isph.shifting > 0
+        self.shifting = sw.shifting
         self.shift_a = cfg.isph.shifting
         self.shift_max = cfg.isph.shifting_max * dx
         self.w_dx = kernels.sigma(dim, self.h) * _spline(dx / self.h)
-        self.collision = cfg.isph.collision_distance > 0
+        self.collision = sw.collisions
         self.r_coll = cfg.isph.collision_distance * dx
         self.restitution = cfg.isph.collision_restitution
 
@@ -93,7 +97,7 @@ class ISPHSolver(SolverCommon):
         self.n_water = scene.count(WATER)
         #: period of each axis (0.0: not periodic), for operators.rel and operators.wrap
         self.period = scene.periods()
-        self.periodic = any(v > 0.0 for v in self.period)
+        self.periodic = sw.periodic
         n = self.n
         self.max_nb = cfg.max_neighbours()
         self.ppe_widenings = 0  # times the ELL PPE matrix was widened after a row overflow
@@ -135,7 +139,7 @@ class ISPHSolver(SolverCommon):
         self.wall_acc = ti.field(float, n)
         self.wall_wsum = ti.field(float, n)
         self.wet = ti.field(ti.i32, n)
-        self.dry_walls = self.g_abs > 0.0
+        self.dry_walls = sw.dry_walls
         self.up = vec((-self.g_np / max(self.g_abs, 1e-300)).tolist())
         self.collisions = ti.field(ti.i32, ())
         self.dt = ti.field(float, ())
@@ -177,7 +181,7 @@ class ISPHSolver(SolverCommon):
             self.nsurf_tab.from_numpy((self.n_surf * n_tab / n_tab[-1]).astype(self.np_fp))
         fp = ti.f64 if is_f64() else ti.f32
         # PPE solver (ti.static switch in the assembly): ELL matrix + Jacobi-PCG, or the sparse builder
-        self.ppe_ell = cfg.isph.ppe.type == "ell_pcg"
+        self.ppe_ell = sw.ppe_ell
         if self.ppe_ell:
             self.ppe = EllPCG(max(self.n_water, 1), ppe_width(cfg), cfg.isph.ppe.tolerance,
                               cfg.isph.ppe.max_iterations, dtype=ppe_precision(cfg.isph.ppe, fp))

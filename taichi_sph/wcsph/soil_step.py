@@ -27,6 +27,7 @@ from .. import guard
 from ..config.schema import PORE_WATER_STIFFNESS
 from ..scene import SOIL, WALL, WATER
 from ..sph import kernels, operators
+from ..switches import held_soil_ids
 from . import soil, terms
 
 _NRED_S = 6
@@ -35,13 +36,14 @@ log = logging.getLogger("taichi_sph")
 
 
 class SoilStep:
-    """Soil state and passes; needs the attributes WCSPHSolver sets before calling `_soil_setup`."""
+    """Soil state and passes; needs the attributes WCSPHSolver sets before calling `_soil_setup` (among
+    them `switches`, taichi_sph/switches.py)."""
 
     def _soil_setup(self, cfg, scene):
         sp = cfg.wcsph.soil
         self.n_soil = scene.count(SOIL)
-        self.has_soil = self.n_soil > 0
-        self.coupled = self.has_soil and self.n_water > 0  # pore pressure and drag
+        self.has_soil = self.switches.soil
+        self.coupled = self.switches.soil_water  # pore pressure and drag
         self.rho_g = sp.grain_density
         self.n0 = sp.porosity
         self.rho_sl = (1.0 - sp.porosity) * sp.grain_density
@@ -77,17 +79,11 @@ class SoilStep:
         self.alpha_s = sp.alpha
         self.g_over_k = self.g_abs / sp.permeability
         self.damping = sp.damping
-        self.soil_fixed = sp.fixed  # rigid skeleton: no acceleration, no drag on the soil, no soil dt limit
+        # rigid skeleton: no acceleration, no drag on the soil, no soil dt limit
+        self.soil_fixed = self.switches.soil_fixed
         # soil blocks held rigid on their own (`soil_blocks[k].fixed`: a permeable base); by particle id
-        self.fixed_ids = np.zeros(0, np.int64)
-        if self.has_soil and not sp.fixed and any(b.fixed for b in cfg.soil_blocks):
-            from ..scene import soil_block_index
-
-            soil_idx = np.nonzero(scene.kind == SOIL)[0]
-            blk = soil_block_index(cfg, scene.position[soil_idx])
-            held = np.array([b.fixed for b in cfg.soil_blocks])[np.maximum(blk, 0)] & (blk >= 0)
-            self.fixed_ids = scene.ids[soil_idx[held]]
-        self.block_fixed = len(self.fixed_ids) > 0
+        self.fixed_ids = held_soil_ids(cfg, scene)
+        self.block_fixed = self.switches.soil_blocks_fixed
 
     def _soil_fields(self, n):
         ns = n if self.has_soil else 1

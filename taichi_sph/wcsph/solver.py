@@ -23,8 +23,9 @@ dt = Delta t^n starts from the accelerations a^n of the previous step (or `initi
 
 The two pair loops read each neighbour from one packed vector (x, v, rho, p / rho^2, m, kind[, h]): one
 contiguous load per neighbour instead of six. Physics a scene does not use is compiled out with
-ti.static flags (air, cohesion, artificial viscosity, XSPH, variable h). Soil (eq 35, 37-45) and Biot
-drag (eq 46-47) are meant to join as further kinds in the same pair loops behind flags of their own.
+ti.static flags (air, cohesion, artificial viscosity, XSPH, variable h, soil, moving walls, periodic
+axes; their values come from taichi_sph/switches.py). Soil (eq 35, 37-45) and the Biot drag (eq 46-47)
+join as a further kind in the same pair loops behind flags of their own (soil_step.py, docs/biot.md).
 """
 
 import logging
@@ -41,6 +42,7 @@ from ..sph import kernels, operators
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
 from ..sph.solver_common import SolverCommon
 from ..sph.wall_motion import WallMotion
+from ..switches import Switches
 from . import eos, terms
 from .inflow import Inflow, activate
 from .initial import initial_state
@@ -96,27 +98,29 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.coh_a = w.air.cohesion / self.rho_a**2
         self.materials = {WATER: (self.rho_w, self.b_w, self.gamma_w), AIR: (self.rho_a, self.b_a, self.gamma_a)}
 
-        # ti.static switches: a scene compiles only what it uses
+        # ti.static switches: a scene compiles only what it uses (switches.py, also what `taichi-sph info
+        # --config` reports)
+        self.switches = sw = Switches.build(cfg, scene)
         self.n = n = scene.n
         #: period of each axis (0.0: not periodic), for operators.rel and operators.wrap
         self.period = scene.periods()
-        self.periodic = any(v > 0.0 for v in self.period)
+        self.periodic = sw.periodic
         self.n_water = scene.count(WATER)
         self.n_air = scene.count(AIR)
         self.n_fluid = self.n_water + self.n_air
         self.n_wall = scene.count(WALL)
-        self.has_air = self.n_air > 0
-        self.cohesion_on = (self.coh_w > 0.0 and self.n_water > 0) or (self.coh_a > 0.0 and self.has_air)
+        self.has_air = sw.air
+        self.cohesion_on = sw.cohesion
         self.av_alpha = w.artificial_viscosity.alpha
         self.av_beta = w.artificial_viscosity.beta
         self.av_eps = w.artificial_viscosity.eps
-        self.av_on = self.av_alpha > 0.0 or self.av_beta > 0.0
+        self.av_on = sw.artificial_viscosity
         self.xsph_eps = w.xsph
-        self.xsph_on = self.xsph_eps > 0.0
-        self.variable_h = w.variable_h
-        self.normalised = w.density == "normalised"
+        self.xsph_on = sw.xsph
+        self.variable_h = sw.variable_h
+        self.normalised = sw.normalised_density
         self.normalise_every = w.normalise_every
-        self.no_slip = cfg.tank.boundary == "no_slip"
+        self.no_slip = sw.no_slip
         self.beta_max = w.beta_max
         self.mass = self.rho_w * self.vol0  # reference water particle mass (run file attribute)
         # largest kinematic viscosity a particle feels (Morris pair coefficient (mu_i + mu_j) / (2 rho_i))
@@ -206,7 +210,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.motion = WallMotion(scene, dim, self.period, f)
         self.wall_body = self.motion.body
         self.wall_origin = self.motion.origin
-        self.moving = self.motion.any
+        self.moving = sw.moving_walls
         self.particle_fields += self.motion.fields()
         self.initial_density = init["density"]
         if self.has_soil:

@@ -1,0 +1,133 @@
+"""The physics switches of a run: one frozen record, built once from the validated config and its scene,
+that both the solvers (their `ti.static` flags, set in `__init__` from it) and `taichi-sph info --config`
+(features.py) read, so what a run compiles and what `info` reports cannot differ.
+
+Each switch belongs to one mode or to both (`MODES` of its field); the other mode's switches are None.
+Every switch but `viscosity` is a compile-time flag: physics it turns off is compiled out of the
+solver's kernels. `viscosity` (a viscosity above zero) is reported the same way, though the viscous
+terms are always compiled.
+
+This module imports numpy only (never taichi): `info --config` builds the scene and these switches
+without starting a solver.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+ISPH, WCSPH = "isph", "wcsph_biot"
+BOTH = (ISPH, WCSPH)
+
+#: kinds of particle (the values of scene.WATER, WALL, SOIL, AIR; scene.py imports taichi through its
+#: kernels, this module must not)
+_WATER, _SOIL, _AIR = 0, 2, 3
+
+
+def _switch(modes: tuple, doc: str):
+    return field(default=None, metadata={"modes": modes, "doc": doc})
+
+
+@dataclass(frozen=True)
+class Switches:
+    """What a run compiles (True: the physics is in the kernels). Build with `Switches.build`."""
+
+    mode: str
+    # ---- both modes
+    no_slip: bool | None = _switch(BOTH, "no-slip walls (tank.boundary: no_slip); else slip")
+    periodic: bool | None = _switch(BOTH, "some axis is periodic (tank.periodic): wrapped positions, "
+                                          "minimum-image pair differences")
+    moving_walls: bool | None = _switch(BOTH, "some obstacle has a prescribed motion")
+    viscosity: bool | None = _switch(BOTH, "a viscosity above zero (reported; the viscous terms are always "
+                                           "compiled)")
+    # ---- mode isph
+    dry_walls: bool | None = _switch((ISPH,), "gravity is on: a side-wall particle above the water counts "
+                                              "as air (left out of every sum)")
+    porous: bool | None = _switch((ISPH,), "porous ground: the scene has soil markers (soil.regions)")
+    turbulence: bool | None = _switch((ISPH,), "Smagorinsky eddy viscosity (fluid.turbulence: smagorinsky)")
+    gradient: str | None = _switch((ISPH,), "pressure gradient form (isph.gradient)")
+    pore_advection: bool | None = _switch((ISPH,), "particles advected at the pore velocity "
+                                                   "(isph.advection: pore); else the Darcy velocity")
+    ground_cone: bool | None = _switch((ISPH,), "free surface in and next to the ground confirmed by an empty "
+                                                "cone (porous ground and isph.ground_surface_cone > 0)")
+    shifting: bool | None = _switch((ISPH,), "particle shifting (isph.shifting > 0)")
+    collisions: bool | None = _switch((ISPH,), "collision handling (isph.collision_distance > 0)")
+    free_surface: bool | None = _switch((ISPH,), "free-surface detection, eq 34 (n_surf > 0)")
+    ppe_ell: bool | None = _switch((ISPH,), "ELL matrix and Jacobi-PCG for the PPE (isph.ppe.type: "
+                                            "ell_pcg); else the sparse builder")
+    # ---- mode wcsph_biot
+    air: bool | None = _switch((WCSPH,), "the scene has air particles")
+    cohesion: bool | None = _switch((WCSPH,), "eq 54 cohesion of water or air (a cohesion above zero and "
+                                              "particles of that material)")
+    artificial_viscosity: bool | None = _switch((WCSPH,), "eq 36 (alpha or beta above zero)")
+    xsph: bool | None = _switch((WCSPH,), "eq 53 XSPH correction (wcsph.xsph > 0)")
+    variable_h: bool | None = _switch((WCSPH,), "eq 52 variable smoothing length")
+    normalised_density: bool | None = _switch((WCSPH,), "eq 27 density normalisation every normalise_every "
+                                                        "steps (wcsph.density: normalised)")
+    soil: bool | None = _switch((WCSPH,), "the scene has soil particles (eq 35, 37-45)")
+    soil_water: bool | None = _switch((WCSPH,), "soil and water together: pore pressure and Biot drag "
+                                                "(eq 46-47)")
+    soil_fixed: bool | None = _switch((WCSPH,), "the whole skeleton is rigid (wcsph.soil.fixed)")
+    soil_blocks_fixed: bool | None = _switch((WCSPH,), "some soil particles are held by "
+                                                       "soil_blocks[k].fixed")
+
+    @classmethod
+    def build(cls, cfg, scene) -> "Switches":
+        """The switches of a validated config and the scene built from it (scene.build_scene)."""
+        kind = np.asarray(scene.kind)
+        n_water, n_air, n_soil = (int(np.count_nonzero(kind == k)) for k in (_WATER, _AIR, _SOIL))
+        common = dict(no_slip=cfg.tank.boundary == "no_slip",
+                      periodic=any(v > 0.0 for v in scene.periods()),
+                      moving_walls=bool(scene.motions))
+        if cfg.mode == ISPH:
+            g_abs = float(np.linalg.norm(np.asarray(cfg.gravity_vector(), dtype=float)))
+            i = cfg.isph
+            return cls(mode=ISPH, **common, viscosity=cfg.fluid.viscosity > 0.0, dry_walls=g_abs > 0.0,
+                       porous=bool(scene.markers),
+                       ground_cone=bool(scene.markers) and i.ground_surface_cone > 0.0,
+                       turbulence=cfg.fluid.turbulence == "smagorinsky",
+                       gradient=i.gradient,
+                       pore_advection=i.advection == "pore",
+                       shifting=i.shifting > 0,
+                       collisions=i.collision_distance > 0,
+                       free_surface=cfg.n_surf() > 0,
+                       ppe_ell=i.ppe.type == "ell_pcg")
+        w = cfg.wcsph
+        air = n_air > 0
+        sp = w.soil
+        return cls(mode=WCSPH, **common,
+                   # (the air's Morris pair coefficient with water mixes in the water's viscosity)
+                   viscosity=(cfg.fluid.viscosity > 0.0 and (n_water > 0 or air))
+                   or (w.air.viscosity > 0.0 and air),
+                   air=air,
+                   cohesion=(w.water.cohesion > 0.0 and n_water > 0) or (w.air.cohesion > 0.0 and air),
+                   artificial_viscosity=w.artificial_viscosity.alpha > 0.0 or w.artificial_viscosity.beta > 0.0,
+                   xsph=w.xsph > 0.0,
+                   variable_h=bool(w.variable_h),
+                   normalised_density=w.density == "normalised",
+                   soil=n_soil > 0,
+                   soil_water=n_soil > 0 and n_water > 0,
+                   soil_fixed=bool(sp.fixed),
+                   soil_blocks_fixed=len(held_soil_ids(cfg, scene)) > 0)
+
+    def report(self) -> dict:
+        """{switch: value} of this mode's switches (JSON-serialisable)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)
+                if f.name != "mode" and self.mode in f.metadata["modes"]}
+
+
+def held_soil_ids(cfg, scene) -> np.ndarray:
+    """Ids of the soil particles held rigid on their own (`soil_blocks[k].fixed`, a permeable base): none
+    when the whole skeleton is fixed (wcsph.soil.fixed) or no block is."""
+    kind = np.asarray(scene.kind)
+    if cfg.mode != WCSPH or cfg.wcsph.soil.fixed or not any(b.fixed for b in cfg.soil_blocks):
+        return np.zeros(0, np.int64)
+    soil_idx = np.nonzero(kind == _SOIL)[0]
+    if not len(soil_idx):
+        return np.zeros(0, np.int64)
+    from .scene import soil_block_index
+
+    blk = soil_block_index(cfg, scene.position[soil_idx])
+    held = np.array([b.fixed for b in cfg.soil_blocks])[np.maximum(blk, 0)] & (blk >= 0)
+    return np.asarray(scene.ids)[soil_idx[held]]
