@@ -28,6 +28,7 @@ ISPH_FLAGS = {
     "gradient": lambda s: GRADIENT[s.grad_mode],
     "pore_advection": lambda s: s.pore_advection,
     "shifting": lambda s: s.shifting,
+    "ground_cone": lambda s: s.ground_cone,
     "collisions": lambda s: s.collision,
     "free_surface": lambda s: s.n_surf > 0,
     "ppe_ell": lambda s: s.ppe_ell,
