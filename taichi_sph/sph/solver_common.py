@@ -2,6 +2,7 @@
 search (cell sort, removal of particles that left the domain, reordering of every particle array)."""
 
 import time as _time
+from types import MappingProxyType
 
 from .. import guard
 
@@ -9,7 +10,19 @@ from .. import guard
 class SolverCommon:
     """Mixin of ISPHSolver and WCSPHSolver. Expects `cfg`, `grid` (sph.grid.NeighbourGrid), `x`, `active`,
     `ids`, `n`, `particle_fields` (every per-particle field, reordered together), `timers` (dict of
-    seconds per phase), `removed_total`, `step_count` and `time`."""
+    seconds per phase), `removed_total`, `step_count` and `time`. Gives the defaults of the solver contract
+    (contract.Solver) that a mode may override."""
+
+    #: extra run-file attributes (none by default)
+    run_attrs = MappingProxyType({})
+    #: air's reference density; None: the mode has no air
+    rho_a = None
+    #: the driver's TimeStepper chooses the step unless a solver proposes its own (`propose_dt`)
+    proposes_dt = False
+
+    def propose_dt(self) -> tuple[float, int]:
+        """Only solvers with `proposes_dt` choose their own time step."""
+        raise NotImplementedError(f"{type(self).__name__} does not choose its time step (proposes_dt is False)")
 
     def _tick(self, key: str, t0: float) -> float:
         """Add the time since t0 to phase `key`; return now (the start of the next phase)."""
