@@ -42,9 +42,6 @@ import logging
 import math
 import os
 import re
-import subprocess
-import sys
-import time as _time
 from pathlib import Path
 
 import numpy as np
@@ -308,23 +305,21 @@ def _run_dask(specs, client):
 def run_case(spec: dict, threads: int | None = None) -> dict:
     """Run one case in its own process and return its table row (metrics from its run file). Runs
     wherever it is called: a local thread or a Dask worker."""
+    from .cli_process import run_cli
+
     env = dict(os.environ)
     env["TAICHI_SPH_PROGRESS"] = "0"
     if threads is None:
         threads = _dask_worker_threads()
     if threads is not None:
         env.setdefault("TI_CPU_MAX_NUM_THREADS", str(threads))
-    cmd = [sys.executable, "-m", "taichi_sph.cli", "run", "--config", spec["config"], "--out", spec["out"],
-           "--no-progress"]
-    t0 = _time.perf_counter()
-    with open(spec["log"], "w", encoding="utf-8") as logf:
-        proc = subprocess.run(cmd, stdout=logf, stderr=subprocess.STDOUT, env=env, check=False)
-    wall = _time.perf_counter() - t0
-    code = proc.returncode
+    res = run_cli(["run", "--config", spec["config"], "--out", spec["out"], "--no-progress"], log_path=spec["log"],
+                  env=env)
+    code = res.rc
     status = STATUS_BY_EXIT.get(code, "killed" if code < 0 else "failed")
-    cause = "" if code == 0 else _cause(spec["log"], code)
+    cause = "" if code == 0 else _cause(res, code)
     row = collect(spec, status, cause)
-    row["process_seconds"] = wall
+    row["process_seconds"] = res.seconds
     return row
 
 
@@ -339,13 +334,9 @@ def _dask_worker_threads() -> int | None:
         return None
 
 
-def _cause(log_path: str, code: int) -> str:
-    try:
-        lines = [ln.strip() for ln in Path(log_path).read_text(encoding="utf-8", errors="replace").splitlines()]
-    except OSError:
-        lines = []
-    errors = [ln for ln in lines if ln.startswith(("taichi-sph: error", "taichi-sph: unstable"))]
-    text = errors[-1] if errors else next((ln for ln in reversed(lines) if ln), "")
+def _cause(res, code: int) -> str:
+    """Why a case did not complete: the line of its output that says so (cli_process.CliRun)."""
+    text = res.failure_line()
     if code < 0:
         text = f"killed by signal {-code}" + (f"; {text}" if text else "")
     return text or f"exit code {code}"

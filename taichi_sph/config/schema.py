@@ -16,6 +16,7 @@ from typing import Annotated, Literal, Optional, Union
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from ..errors import InputError
+from ..sph.support import SUPPORT_FACTOR
 
 PosFloat = Annotated[float, Field(gt=0)]
 NonNegFloat = Annotated[float, Field(ge=0)]
@@ -893,7 +894,7 @@ def _explicit_keys(model, prefix: str) -> list[str]:
 def periodic_cell(cfg: "Config") -> float:
     """Neighbour-search cell of the mode (m): the support radius 2.4 dx (isph), or 2 h_max plus the
     Verlet skin (wcsph_biot, h_max = 1.1 h0 with variable h)."""
-    re = 2.4 * cfg.dx
+    re = SUPPORT_FACTOR * cfg.dx
     if cfg.mode == "isph":
         return re
     h_hi = (1.1 if cfg.wcsph.variable_h else 1.0) * 0.5 * re
@@ -923,20 +924,15 @@ def _check_periodic(cfg: "Config") -> None:
             _fail(f"water[{k}].initial_velocity", "taylor_green needs dim 2 and tank.periodic [0, 1]")
 
 
-#: kernel support radius over dx, the same as taichi_sph.sph.kernels.SUPPORT_FACTOR (a test keeps them equal;
-#: the schema does not import Taichi, so that bad input is reported before Taichi starts)
-KERNEL_SUPPORT = 2.4
-
-
 def _check_pore_lattice(cfg: Config) -> None:
     """Water in ground of porosity eps sits on a pore lattice of spacing dx eps^(-1/dim) (eq 33, constant
     particle mass). At or beyond the kernel support (2.4 dx) a particle there has no neighbour: its density
     and PPE row are empty and the first step gives NaN. Such a porosity cannot be resolved at any dx."""
     if cfg.mode != "isph":
         return
-    floor = KERNEL_SUPPORT ** (-cfg.dim)
+    floor = SUPPORT_FACTOR ** (-cfg.dim)
     why = (f"leaves water in the ground on a pore lattice of spacing dx eps^(-1/{cfg.dim}) at or beyond the "
-           f"kernel support ({KERNEL_SUPPORT:g} dx), with no neighbours; it must be above {floor:.3f} in {cfg.dim}D")
+           f"kernel support ({SUPPORT_FACTOR:g} dx), with no neighbours; it must be above {floor:.3f} in {cfg.dim}D")
     for k, reg in enumerate(cfg.soil.regions):
         if reg.eps0 <= floor:
             _fail(f"soil.regions[{k}].eps0", f"{reg.eps0:g} {why}")

@@ -4,7 +4,7 @@ search (cell sort, removal of particles that left the domain, reordering of ever
 import time as _time
 from types import MappingProxyType
 
-from .. import guard
+from ..instability import out_of_domain
 
 
 class SolverCommon:
@@ -31,13 +31,13 @@ class SolverCommon:
         return t1
 
     def _sort_and_reorder(self) -> None:
-        """Counting sort into the cells; particles outside the grid are taken out, counted, and reported to
-        the guard (which stops the run or warns, per `guard.out_of_domain`); then every particle array is
-        put in cell order (memory locality of the neighbour loops)."""
+        """Counting sort into the cells; particles outside the grid are taken out, counted, and reported
+        to instability.out_of_domain (which stops the run or warns, per `guard.out_of_domain`); then every
+        particle array is put in cell order (memory locality of the neighbour loops)."""
         removed = self.grid.sort(self.x, self.active, self.n)
         if len(removed):
             ids = self.ids.to_numpy()[removed]
             self.removed_total += len(removed)
-            guard.out_of_domain(self.cfg, self.step_count, self.time, ids, self.removed_total)
+            out_of_domain(self.cfg, self.step_count, self.time, ids, self.removed_total)
         for f in self.particle_fields:
             self.grid.reorder(f, self.n)
