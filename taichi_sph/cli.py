@@ -66,6 +66,9 @@ def _parser() -> argparse.ArgumentParser:
     sw = sub.add_parser("sweep", help="run a grid or list of cases in parallel and gather their metrics")
     _sweep_arguments(sw)
 
+    sc = sub.add_parser("schema", help="print the JSON Schema of case files (for editors; docs/config.schema.json)")
+    sc.add_argument("--out", help="write it to this file instead")
+
     for name in UNAVAILABLE:
         s = sub.add_parser(name, help="not available in this version")
         s.add_argument("args", nargs=argparse.REMAINDER)
@@ -152,6 +155,20 @@ def _cmd_sweep(args) -> int:
     from .sweep import run_command
 
     return run_command(args)
+
+
+def _cmd_schema(args) -> int:
+    from .config.schema import json_schema
+
+    text = json.dumps(json_schema(), indent=2) + "\n"
+    if args.out is None:
+        sys.stdout.write(text)
+        return 0
+    try:
+        Path(args.out).write_text(text)
+    except OSError as exc:
+        raise InputError(f"--out '{args.out}': cannot be written ({exc.__class__.__name__})") from None
+    return 0
 
 
 def _check_out_path(out: str, key: str) -> None:
@@ -255,7 +272,7 @@ def _print_tree(data, indent=0):
 
 #: subcommand -> its function (args -> exit code); the parser (`_parser`) defines each one's arguments
 COMMANDS = {"run": _cmd_run, "info": _cmd_info, "render": _cmd_render, "plot": _cmd_plot, "sweep": _cmd_sweep,
-            "resume": _cmd_resume}
+            "resume": _cmd_resume, "schema": _cmd_schema}
 #: subcommands the parser knows but this version does not run (tools/bench.py and tools/validate.py do)
 UNAVAILABLE = ("bench", "validate")
 SUBCOMMANDS = (*COMMANDS, *UNAVAILABLE)

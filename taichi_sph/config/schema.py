@@ -225,3 +225,14 @@ def check_mode_sections(cfg: Config) -> None:
 #: the rules Config runs, in this order (each raises base.fail naming the key)
 CROSS_FIELD_RULES = (check_geometry, check_ground, check_probes, check_images, check_metrics, check_periodic,
                      check_tank_room, check_soil_blocks, check_mode_sections, check_times)
+
+
+#: JSON Schema dialect of `json_schema` (pydantic writes draft 2020-12)
+JSON_SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
+
+
+def json_schema() -> dict:
+    """The JSON Schema of a case file (`taichi-sph schema`, docs/config.schema.json), for editors that
+    complete and check YAML. It holds each key's type, range and default; the cross-field rules (lengths
+    equal to dim, blocks inside the tank, options of the other mode) are checked by `taichi-sph --check`."""
+    return {"$schema": JSON_SCHEMA_DIALECT, **Config.model_json_schema(), "title": "taichi-sph case file"}
