@@ -247,9 +247,10 @@ def test_terzaghi_consolidation(run_cli, tmp_path):
 
 
 def test_soft_pore_water_warns_and_is_recorded(run_cli, tmp_path):
-    """A config whose water is softer than 20 M (consolidation.yaml with the seed-like c0 = 20 m/s: K_f =
+    """A config whose water is softer than 40 M (consolidation.yaml with the seed-like c0 = 20 m/s: K_f =
     0.4 MPa, M = E (1 - nu) / ((1 + nu) (1 - 2 nu)) = 1.346 MPa) warns, naming the keys, and the run file
-    records K_f / M = 0.297; the default sound speed records 20 and does not warn."""
+    records K_f / M = 0.297; c0 = 164 m/s (K_f = 20 M, the floor before, whose B = 0.952 left the undrained
+    check short of 0.95) warns too; the default sound speed records 40 and does not warn."""
     import h5py
 
     soft, stiff = tmp_path / "soft.h5", tmp_path / "stiff.h5"
@@ -264,4 +265,8 @@ def test_soft_pore_water_warns_and_is_recorded(run_cli, tmp_path):
     with h5py.File(soft) as f:
         assert f.attrs["pore_water_modulus_ratio"] == pytest.approx(1000.0 * 20.0**2 / m, rel=1e-12)
     with h5py.File(stiff) as f:
-        assert f.attrs["pore_water_modulus_ratio"] == pytest.approx(20.0, rel=1e-9)
+        assert f.attrs["pore_water_modulus_ratio"] == pytest.approx(40.0, rel=1e-9)
+    r3 = run_cli("--config", "configs/consolidation.yaml", "--set", "end_time=0.0005", "--set",
+                 f"wcsph.water.sound_speed={(20.0 * m / 1000.0) ** 0.5!r}", "--out", tmp_path / "k20.h5", "--no-progress")
+    assert r3.returncode == 0, r3.stderr
+    assert "wcsph.water.sound_speed" in r3.stderr, r3.stderr
