@@ -568,7 +568,8 @@ DIAGNOSES = {
                 "more drainage path); the small setting's tank is 2-4 particles wide, where the side walls weigh "
                 "most (walls now mirror the pressure along their faces, which took the 4-column error from 0.080 "
                 "to 0.056 at dx 5 mm; docs/biot.md, Terzaghi consolidation). Normalising the kernel gradient to the "
-                "lattice took this setting from 0.074 / 0.060 / 0.050 to 0.069 / 0.055 / 0.045.",
+                "lattice took this setting from 0.074 / 0.060 / 0.050 to 0.069 / 0.055 / 0.045; the pore water's default "
+                "K_f >= 40 M (20 M before) to 0.066 / 0.056 / 0.042.",
     "critical_gradient": "converging since the kernel gradient is normalised to the lattice (docs/biot.md, Critical "
                          "gradient): before, the water's pressure force, the soil's pore term and its stress "
                          "divergence each read 0.99 of the exact gradient in different proportions, and the "
