@@ -450,6 +450,11 @@ class WCSPHSoil(Strict):
     #: Mohr-Coulomb with sin(phi) = tan_phi: mapped to friction_angle = asin(tan_phi) (0.5 -> 30 deg, not
     #: atan(0.5) = 26.6 deg); at most 1. Give this or `friction_angle`, not both
     tan_phi: NonNegFloat | None = None
+    #: dilatancy angle psi (degrees) of the plastic flow: plastic volume grows at sin(psi) times the plastic
+    #: shear strain rate. 0 (default): no plastic volume change, a layer in steady simple shear slides at
+    #: tan(phi*) = sin(phi), below phi; psi = phi (associated flow): it slides at phi, dilating while it
+    #: slides (Davis 1968; docs/biot.md). At most the friction angle
+    dilatancy_angle: Annotated[float, Field(ge=0, lt=90)] = 0.0
     #: Mohr-Coulomb cohesion c (Pa) (seed: none)
     cohesion: NonNegFloat = 0.0
     #: largest mean tension the soil carries (Pa, >= 0); beyond it the stress is set to zero (tension
@@ -1012,6 +1017,9 @@ def _check_soil_blocks(cfg: "Config") -> None:
     if soil.tan_phi is not None and soil.tan_phi > 1.0:
         _fail("wcsph.soil.tan_phi", f"{soil.tan_phi:g} exceeds 1: the seed's tau_f = p tan_phi is Mohr-Coulomb with "
               "sin(phi) = tan_phi, which has no angle above 1 (give friction_angle in degrees)")
+    if soil.dilatancy_angle > soil.friction_angle_deg() + 1e-12:
+        _fail("wcsph.soil.dilatancy_angle", f"{soil.dilatancy_angle:g} deg exceeds the friction angle "
+              f"{soil.friction_angle_deg():g} deg (psi = phi is the associated flow rule)")
     tan_mc = math.tan(math.radians(soil.friction_angle_deg()))
     if soil.tension_cutoff is not None and tan_mc > 0 and soil.tension_cutoff > soil.cohesion / tan_mc:
         _fail("wcsph.soil.tension_cutoff", f"must not exceed cohesion / tan(phi) = {soil.cohesion / tan_mc:g} Pa "
