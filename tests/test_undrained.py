@@ -101,7 +101,7 @@ def test_undrained_loading_and_consolidation(run_cli, tmp_path):
     is undrained while it rings), t_0+ = the first 40 ms, 7 ringing periods or 28 crossings of the column
     by the undrained wave. Reference: Skempton's B with the model's pore fluid (K_p = n K_f, K_f = 40 M),
     0.976. Measured: 0.967 at dx 0.01 (dx 0.005: 0.971; cfl 0.1 instead of 0.25: 0.967); at K_f = 20 M it
-    was 0.944 / 0.948 against B = 0.952. Bounds: the 0.95 asked of the check, and B - 0.013, the measured
+    was 0.944 / 0.948 against B = 0.952. Bounds: the acceptance value 0.95, and B - 0.013, the measured
     shortfall 0.009 plus the spread between dx 0.01 and 0.005 (0.004, as at 20 M; the fit's own scatter between
     windows is 0.0015).
     (2) Dissipation, k = 5e-3 m/s, Terzaghi's c_v = k M / (rho_w g) (eq 55) = 0.686 m^2/s; the model's own
