@@ -69,6 +69,8 @@ class Switches:
     soil_fixed: bool | None = _switch((WCSPH,), "the whole skeleton is rigid (wcsph.soil.fixed)")
     soil_blocks_fixed: bool | None = _switch((WCSPH,), "some soil particles are held by "
                                                        "soil_blocks[k].fixed")
+    soil_dilatancy: bool | None = _switch((WCSPH,), "plastic flow changes the soil's volume "
+                                                    "(wcsph.soil.dilatancy_angle > 0)")
 
     @classmethod
     def build(cls, cfg, scene) -> "Switches":
@@ -107,7 +109,8 @@ class Switches:
                    soil=n_soil > 0,
                    soil_water=n_soil > 0 and n_water > 0,
                    soil_fixed=bool(sp.fixed),
-                   soil_blocks_fixed=len(held_soil_ids(cfg, scene)) > 0)
+                   soil_blocks_fixed=len(held_soil_ids(cfg, scene)) > 0,
+                   soil_dilatancy=n_soil > 0 and sp.dilatancy_angle > 0.0)
 
     def report(self) -> dict:
         """{switch: value} of this mode's switches (JSON-serialisable)."""

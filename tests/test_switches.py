@@ -48,6 +48,7 @@ WCSPH_FLAGS = {
     "soil_water": lambda s: s.coupled,
     "soil_fixed": lambda s: s.soil_fixed,
     "soil_blocks_fixed": lambda s: s.block_fixed,
+    "soil_dilatancy": lambda s: s.dilatant,
 }
 FLAGS = {"isph": ISPH_FLAGS, "wcsph_biot": WCSPH_FLAGS}
 

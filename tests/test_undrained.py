@@ -3,7 +3,7 @@ that follows (Terzaghi, eq 55-56).
 
 The column is configs/consolidation.yaml's: soil 0.2 m on the impermeable floor, drained at its top into
 free water; E = 1 MPa, nu = 0.3 (constrained modulus M = 1.346 MPa), n = 0.4, the water's default sound
-speed with soil, K_f = rho_w c0^2 = 20 M (docs/biot.md, "Storage and c_v").
+speed with soil, K_f = rho_w c0^2 = 40 M (docs/biot.md, "Storage and c_v").
 
 The load. Stage 1 is the config as it is, kept at its first frame: the K0 start with u_e = u0 cos(pi y /
 H) (H = 0.4 m, u0 = 500 Pa) added to the pore water and taken from the soil's effective stress. Stage 2
@@ -15,13 +15,13 @@ the single term u_e = B Delta sigma(y) exp(-pi^2 Tv), Tv = c_v t / H^2 (eq 56, `
 
 Undrained response (Skempton 1954, in one-dimensional loading): u / Delta sigma = B = 1 / (1 + n M / K_p)
 with K_p the pore fluid's modulus. The model's storage is 1 / K_f per mixture volume (docs/biot.md), i.e.
-a pore fluid of modulus K_p = n K_f: B = 1 / (1 + M / K_f) = 1 / 1.05 = 0.952 at K_f = 20 M.
+a pore fluid of modulus K_p = n K_f: B = 1 / (1 + M / K_f) = 1 / 1.025 = 0.976 at K_f = 40 M.
 
 A suddenly applied load sets the column ringing in its undrained quarter-wave mode (period 4 L / c_u,
-L = 0.2 m, c_u = sqrt((M + K_f) / (rho_w + (1 - n) rho_s)) = 104.5 m/s: 7.65 ms) with an amplitude of about
-the load itself, decaying at ~17 1/s only. The undrained ratio is the mean about which it rings: a least-
+L = 0.2 m, c_u = sqrt((M + K_f) / (rho_w + (1 - n) rho_s)) = 146 m/s: 5.48 ms) with an amplitude of about
+the load itself, decaying at ~20-30 1/s only. The undrained ratio is the mean about which it rings: a least-
 squares fit of u / (Delta sigma exp(-pi^2 Tv)) at mid-depth to a constant plus a decaying periodic
-signal (two harmonics) over the first 40 ms = 5 periods. The dissipation is read on the one-period mean
+signal (two harmonics) over the first 40 ms = 7 periods. The dissipation is read on the one-period mean
 of u_e around each Tv, against the one-period mean of the exact solution.
 
 u_e is the water pressure minus that of a twin run without the load and with the same permeability (the
@@ -35,7 +35,7 @@ CONFIG = "configs/consolidation.yaml"
 U0, H, SOIL_TOP = 500.0, 0.4, 0.2
 E, NU, N0, RHO_S, RHO_W = 1.0e6, 0.3, 0.4, 2650.0, 1000.0
 M = E * (1 - NU) / ((1 + NU) * (1 - 2 * NU))
-K_F = 20.0 * M
+K_F = 40.0 * M
 EVERY = 0.00025
 #: quarter-wave period of the undrained column, 4 L / c_u (s)
 PERIOD = 4 * SOIL_TOP / np.sqrt((M + K_F) / (RHO_W + (1 - N0) * RHO_S))
@@ -98,18 +98,18 @@ def dissipation_errors(t, y, ue, cv, tvs):
 
 def test_undrained_loading_and_consolidation(run_cli, tmp_path):
     """(1) Undrained ratio at mid-depth, k = 5e-5 m/s (c_v = 6.9e-3 m^2/s: Tv = 0.0017 by 40 ms, the load
-    is undrained while it rings), t_0+ = the first 40 ms, 5 ringing periods or 20 crossings of the column
-    by the undrained wave (2 ms each). Measured: 0.944 at dx 0.01 (dx 0.005: 0.948; cfl 0.1 instead of
-    0.25: 0.944); Skempton's B with the model's pore fluid (K_p = n K_f, K_f = 20 M) is 0.952, so the model
-    carries 0.99 of its B in the water, the effective stress took the rest (0.048 of the load, as 1 - B
-    says) and the total carried is 0.992 of the load. Bound: B - 0.012, the 0.008 measured shortfall plus
-    the 0.004 spread between dx 0.01 and 0.005 (the fit's own scatter between windows is 0.0015). The
-    0.95 asked of the check is not reached at the default sound speed (docs/biot.md, "Undrained
-    loading"): K_f = 20 M leaves B itself at 0.952.
+    is undrained while it rings), t_0+ = the first 40 ms, 7 ringing periods or 28 crossings of the column
+    by the undrained wave. Reference: Skempton's B with the model's pore fluid (K_p = n K_f, K_f = 40 M),
+    0.976. Measured: 0.967 at dx 0.01 (dx 0.005: 0.971; cfl 0.1 instead of 0.25: 0.967); at K_f = 20 M it
+    was 0.944 / 0.948 against B = 0.952. Bounds: the acceptance value 0.95, and B - 0.013, the measured
+    shortfall 0.009 plus the spread between dx 0.01 and 0.005 (0.004, as at 20 M; the fit's own scatter between
+    windows is 0.0015).
     (2) Dissipation, k = 5e-3 m/s, Terzaghi's c_v = k M / (rho_w g) (eq 55) = 0.686 m^2/s; the model's own
-    c_v is 0.952 of it. Measured, largest |u_e / u0 - exact| over the soil (one-period means): Tv 0.1
-    0.039, Tv 0.2 0.020 (cfl 0.1: the same to 0.001). Bounds 0.045 and 0.025: the measured error and its dt
-    spread plus 0.005 of u0 (the ringing left in a one-period mean)."""
+    c_v is 0.976 of it. Measured, largest |u_e / u0 - exact| over the soil (one-period means): Tv 0.1
+    0.021, Tv 0.2 0.028 (cfl 0.1: the same to 1e-4), the model above the exact: it decays a little slower
+    (the drained face's kernel-wide zone, docs/biot.md; at 20 M the smaller B hid part of it: 0.039 /
+    0.020). Bounds 0.03 and 0.035: the measured error plus 0.005 of u0 (the ringing left in a one-period
+    mean) and rounding up."""
     stage1 = _stage1(run_cli, tmp_path)
 
     k_slow = 5e-5
@@ -117,12 +117,13 @@ def test_undrained_loading_and_consolidation(run_cli, tmp_path):
     t, y, ue = _loaded_and_twin(run_cli, tmp_path, stage1, k_slow, 0.04)
     ratio, period, lam = undrained_ratio(t, y, ue, cv_slow)
     b_skempton = 1.0 / (1.0 + N0 * M / (N0 * K_F))
-    assert ratio > b_skempton - 0.012, (ratio, b_skempton, period, lam)
+    assert ratio >= 0.95, (ratio, b_skempton, period, lam)
+    assert ratio > b_skempton - 0.013, (ratio, b_skempton, period, lam)
     assert ratio < 1.0, ratio  # the water cannot carry more than the load
 
     k = 5e-3
     cv = consolidation_coefficient(k, E, NU)
     t, y, ue = _loaded_and_twin(run_cli, tmp_path, stage1, k, 0.125)
     err = dissipation_errors(t, y, ue, cv, (0.1, 0.2))
-    assert err[0.1] < 0.045, err
-    assert err[0.2] < 0.025, err
+    assert err[0.1] < 0.03, err
+    assert err[0.2] < 0.035, err

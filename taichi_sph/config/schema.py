@@ -182,7 +182,7 @@ class Config(Strict):
 
     def pore_water_speed(self) -> float:
         """Sound speed at which the water's modulus K_f = rho_w c0^2 is PORE_WATER_STIFFNESS M (m/s; 0
-        without soil): the storage 1 / K_f then slows consolidation by less than 5 % (docs/biot.md)."""
+        without soil): the storage 1 / K_f then slows consolidation by 2.5 % at most (docs/biot.md)."""
         m = self.soil_modulus()
         return 0.0 if m is None else (PORE_WATER_STIFFNESS * m / self.fluid.density) ** 0.5
 

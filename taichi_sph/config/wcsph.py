@@ -16,9 +16,10 @@ from .geometry import Box, Shape, check_box
 
 #: smallest ratio K_f / M of the water's EOS modulus to the soil's constrained modulus that the default
 #: sound speed gives a scene with soil: the model's storage is 1 / K_f per mixture volume, so consolidation
-#: runs with c_v = k / (gamma_w (1 / M + 1 / K_f)) = k M / gamma_w / (1 + M / K_f), 1 / 1.05 = 0.952 of the
-#: physical value at 20 (docs/biot.md, "Storage and c_v")
-PORE_WATER_STIFFNESS = 20.0
+#: runs with c_v = k M / gamma_w / (1 + M / K_f) and a sudden load goes to the pore water by Skempton's
+#: B = 1 / (1 + M / K_f): 1 / 1.025 = 0.976 at 40 (0.952 at 20 left the undrained ratio at 0.944-0.948,
+#: short of 0.95; docs/biot.md, "Storage and c_v" and "Undrained loading")
+PORE_WATER_STIFFNESS = 40.0
 
 
 class WCSPHWater(Strict):
@@ -27,8 +28,9 @@ class WCSPHWater(Strict):
     #: exponent gamma of the Tait equation of state eq 41
     gamma: PosFloat = 7.0
     #: sound speed c0 (m/s) of eq 41; default speed_factor x expected_speed, and with soil at least
-    #: sqrt(20 M / rho_w), M the soil's constrained modulus (K_f = rho_w c0^2 >= 20 M: consolidation within
-    #: 5 % of Terzaghi's c_v, docs/biot.md); a value below that logs a warning
+    #: sqrt(40 M / rho_w), M the soil's constrained modulus (K_f = rho_w c0^2 >= 40 M: consolidation within
+    #: 2.5 % of Terzaghi's c_v, a sudden load 0.976 in the pore water, docs/biot.md); a value below that logs
+    #: a warning
     sound_speed: PosFloat | None = None
     #: c0 = speed_factor x expected_speed when sound_speed is not given (at least 10: density varies < 1 %)
     speed_factor: Annotated[float, Field(ge=10)] = 10.0
@@ -146,6 +148,11 @@ class WCSPHSoil(Strict):
     #: Mohr-Coulomb with sin(phi) = tan_phi: mapped to friction_angle = asin(tan_phi) (0.5 -> 30 deg, not
     #: atan(0.5) = 26.6 deg); at most 1. Give this or `friction_angle`, not both
     tan_phi: NonNegFloat | None = None
+    #: dilatancy angle psi (degrees) of the plastic flow: plastic volume grows at sin(psi) times the plastic
+    #: shear strain rate. 0 (default): no plastic volume change, a layer in steady simple shear slides at
+    #: tan(phi*) = sin(phi), below phi; psi = phi (associated flow): it slides at phi, dilating while it
+    #: slides (Davis 1968; docs/biot.md). At most the friction angle
+    dilatancy_angle: Annotated[float, Field(ge=0, lt=90)] = 0.0
     #: Mohr-Coulomb cohesion c (Pa) (seed: none)
     cohesion: NonNegFloat = 0.0
     #: largest mean tension the soil carries (Pa, >= 0); beyond it the stress is set to zero (tension
@@ -180,6 +187,9 @@ class WCSPHSoil(Strict):
         if self.tan_phi is not None and self.tan_phi > 1.0:
             fail("tan_phi", f"{self.tan_phi:g} exceeds 1: the seed's tau_f = p tan_phi is Mohr-Coulomb with "
                  "sin(phi) = tan_phi, which has no angle above 1 (give friction_angle in degrees)")
+        if self.dilatancy_angle > self.friction_angle_deg() + 1e-12:
+            fail("dilatancy_angle", f"{self.dilatancy_angle:g} deg exceeds the friction angle "
+                 f"{self.friction_angle_deg():g} deg (psi = phi is the associated flow rule)")
         tan_mc = math.tan(math.radians(self.friction_angle_deg()))
         if self.tension_cutoff is not None and tan_mc > 0 and self.tension_cutoff > self.cohesion / tan_mc:
             fail("tension_cutoff", f"must not exceed cohesion / tan(phi) = {self.cohesion / tan_mc:g} Pa "

@@ -8,7 +8,7 @@ c_v = k M / (rho_w g) of eq 55 (`consolidation_coefficient`), M = E (1 - nu) / (
 constrained modulus (plane strain; the seed's eq 55 writes the bulk modulus B^e of its eq 43 there, the
 oedometric modulus is the one a laterally confined layer has). The model's own value, with the storage
 1 / K_f of the water's EOS (K_f = rho_w c0^2), is `model_consolidation_coefficient` = k / (rho_w g (1 / M
-+ 1 / K_f)); the default sound speed keeps K_f >= 20 M, so the two differ by at most 5 % (docs/biot.md,
++ 1 / K_f)); the default sound speed keeps K_f >= 40 M, so the two differ by at most 2.5 % (docs/biot.md,
 "Storage and c_v").
 
 u_e is the water pressure of the run minus that of the same run without the excess (the model's own

@@ -70,9 +70,14 @@ def mean_and_shear(sig, dim: ti.template()):
 
 
 @ti.func
-def stress_update(sig, L, dt, e0, p_ref, m, p_floor, nu, k_fac, sin_phi, c_cos, t_cut, dim: ti.template()):
+def stress_update(sig, L, dt, e0, p_ref, m, p_floor, nu, k_fac, sin_phi, c_cos, t_cut, dim: ti.template(),
+                  sin_psi=0.0, dilatant: ti.template() = False):
     """One explicit step of eq 42-45 with the return to the yield surface tau_f = p sin(phi) + c cos(phi).
     `L` the velocity gradient d v_a / d x_b, `k_fac` = K_d / E, `sin_phi` = sin(phi), `c_cos` = c cos(phi).
+    Plastic flow along the potential tau - p sin(psi) (compression positive): with `dilatant` (psi > 0) the
+    plastic strain d lambda (s / (2 tau) - sin(psi) I / d) dilates the soil, so the return raises p by
+    K d lambda sin(psi) while it lowers tau by G d lambda, d lambda = (tau - tau_f) / (G + K sin(phi)
+    sin(psi)); without it the return is radial in the deviatoric plane (psi = 0).
     Returns (sigma^{n+1}, plastic shear strain increment, E used)."""
     eye = ti.Matrix.identity(float, dim)
     p0, _, _ = mean_and_shear(sig, dim)
@@ -93,8 +98,14 @@ def stress_update(sig, L, dt, e0, p_ref, m, p_floor, nu, k_fac, sin_phi, c_cos, 
     else:
         tau_f = ti.max(p * sin_phi + c_cos, 0.0)
         if tau > tau_f:
-            out = p * eye + s * (tau_f / tau)
-            dgam = (tau - tau_f) / g
+            if ti.static(dilatant):
+                kb = k_fac * e
+                dlam = (tau - tau_f) / (g + kb * sin_phi * sin_psi)
+                out = (p + kb * dlam * sin_psi) * eye + s * (ti.max(tau - g * dlam, 0.0) / tau)
+                dgam = dlam
+            else:
+                out = p * eye + s * (tau_f / tau)
+                dgam = (tau - tau_f) / g
     return out, dgam, e
 
 

@@ -57,6 +57,9 @@ class SoilStep:
         # yield surface tau_f = p sin(phi) + c cos(phi) (soil.py; `tan_phi` given: sin(phi) = tan_phi)
         self.phi_deg = sp.friction_angle_deg()
         self.sin_phi, self.c_cos = soil.yield_constants(self.phi_deg, sp.cohesion)
+        # plastic flow rule: dilatancy angle psi (0: no plastic volume change)
+        self.sin_psi = math.sin(math.radians(sp.dilatancy_angle))
+        self.dilatant = bool(self.switches.soil_dilatancy)
         if sp.tension_cutoff is not None:
             self.t_cut = sp.tension_cutoff
         else:  # where tau_f vanishes: p = -c cot(phi)
@@ -166,7 +169,7 @@ class SoilStep:
                 if dt > 0.0:
                     sig, dgam, _e = soil.stress_update(self.sig[i], L, dt, self.e0, self.p_ref, self.m_exp,
                                                        self.p_floor, self.nu_s, self.k_fac, self.sin_phi, self.c_cos,
-                                                       self.t_cut, self.dim)
+                                                       self.t_cut, self.dim, self.sin_psi, self.dilatant)
                     self.sig[i] = sig
                     self.eps_p[i] += dgam
                 self.rho[i] = rho
