@@ -14,7 +14,6 @@ from pathlib import Path
 
 from .errors import EXIT_INPUT, InputError, InstabilityError
 
-SUBCOMMANDS = ("run", "info", "render", "plot", "sweep", "resume", "bench", "validate")
 log = logging.getLogger("taichi_sph")
 
 
@@ -67,7 +66,10 @@ def _parser() -> argparse.ArgumentParser:
     sw = sub.add_parser("sweep", help="run a grid or list of cases in parallel and gather their metrics")
     _sweep_arguments(sw)
 
-    for name in ("bench", "validate"):
+    sc = sub.add_parser("schema", help="print the JSON Schema of case files (for editors; docs/config.schema.json)")
+    sc.add_argument("--out", help="write it to this file instead")
+
+    for name in UNAVAILABLE:
         s = sub.add_parser(name, help="not available in this version")
         s.add_argument("args", nargs=argparse.REMAINDER)
     return p
@@ -83,25 +85,10 @@ def main(argv=None) -> int:
         if args.command is None:
             _parser().print_help()
             return EXIT_INPUT
-        if args.command == "run":
-            return _cmd_run(args)
-        if args.command == "info":
-            return _cmd_info(args)
-        if args.command == "render":
-            from .render.command import run_command
-
-            return run_command(args)
-        if args.command == "plot":
-            from .plot import run_command as plot_command
-
-            return plot_command(args)
-        if args.command == "resume":
-            return _cmd_resume(args)
-        if args.command == "sweep":
-            from .sweep import run_command as sweep_command
-
-            return sweep_command(args)
-        raise InputError(f"'{args.command}' is not available in this version")
+        command = COMMANDS.get(args.command)
+        if command is None:
+            raise InputError(f"'{args.command}' is not available in this version")
+        return command(args)
     except InputError as exc:
         print(f"taichi-sph: error: {exc}", file=sys.stderr)
         return EXIT_INPUT
@@ -149,6 +136,38 @@ def _cmd_resume(args) -> int:
     summary = run(cfg, out_path=args.run_file, arch=args.arch, progress=False if args.no_progress else None,
                   resume_from=checkpoint)
     log.info("done: %d steps in %.1f s -> %s", summary["steps"], summary["wall_seconds"], args.run_file)
+    return 0
+
+
+def _cmd_render(args) -> int:
+    from .render.command import run_command
+
+    return run_command(args)
+
+
+def _cmd_plot(args) -> int:
+    from .plot import run_command
+
+    return run_command(args)
+
+
+def _cmd_sweep(args) -> int:
+    from .sweep import run_command
+
+    return run_command(args)
+
+
+def _cmd_schema(args) -> int:
+    from .config.schema import json_schema
+
+    text = json.dumps(json_schema(), indent=2) + "\n"
+    if args.out is None:
+        sys.stdout.write(text)
+        return 0
+    try:
+        Path(args.out).write_text(text)
+    except OSError as exc:
+        raise InputError(f"--out '{args.out}': cannot be written ({exc.__class__.__name__})") from None
     return 0
 
 
@@ -250,6 +269,13 @@ def _print_tree(data, indent=0):
         else:
             print(f"{pad}{key}: {val}")
 
+
+#: subcommand -> its function (args -> exit code); the parser (`_parser`) defines each one's arguments
+COMMANDS = {"run": _cmd_run, "info": _cmd_info, "render": _cmd_render, "plot": _cmd_plot, "sweep": _cmd_sweep,
+            "resume": _cmd_resume, "schema": _cmd_schema}
+#: subcommands the parser knows but this version does not run (tools/bench.py and tools/validate.py do)
+UNAVAILABLE = ("bench", "validate")
+SUBCOMMANDS = (*COMMANDS, *UNAVAILABLE)
 
 if __name__ == "__main__":
     sys.exit(main())

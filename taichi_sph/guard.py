@@ -10,8 +10,8 @@ Causes and their families (exit codes in taichi_sph/errors.py):
   counted and warned) (`domain`, exit 6).
 
 Every message has the same shape: "step S, t = T s: <quantity> ... (particle ids ...)". The solvers call the
-`raise_*`/`*_error` helpers at the places they detect a cause inside a step (cheap reductions already in
-their kernels); the driver calls StabilityGuard.after_step every step (speed) and StabilityGuard.check_fields
+helpers of taichi_sph/instability.py (re-exported here) at the places they detect a cause inside a step
+(cheap reductions already in their kernels); the driver calls StabilityGuard.after_step every step (speed) and StabilityGuard.check_fields
 every guard.every steps and on every frame (the host-side checks: non-finite, density ratio, walls at
 rest, fluid inside walls).
 """
@@ -25,7 +25,15 @@ import numpy as np
 
 from .backend import ids_text
 from .errors import InstabilityError
-from .scene import AIR, WALL, WATER
+from .instability import (  # noqa: F401  (the solvers call them as guard.*)
+    neighbour_overflow_error,
+    non_finite_error,
+    out_of_domain,
+    solver_failure,
+    time_step_error,
+    where,
+)
+from .kinds import AIR, WALL, WATER
 
 log = logging.getLogger("taichi_sph")
 
@@ -38,51 +46,6 @@ WALL_TOLERANCE = 1.0e-6
 #: (half a spacing behind the face). Deepest past a face over whole runs (frames): dam break isph
 #: (configs/dambreak.yaml) 0.004 dx, dam break wcsph_biot at dx = a / 20 0.42 dx, breakwater 0
 WALL_CROSSING_DEPTH = 0.5
-
-
-def where(step: int, time: float) -> str:
-    return f"step {step}, t = {time:.6g} s"
-
-
-def out_of_domain(cfg, step: int, time: float, ids, removed_total: int) -> None:
-    """Particles the neighbour grid dropped (outside the domain): stop or warn, as guard.out_of_domain says."""
-    ids = [int(i) for i in ids]
-    if cfg.guard.out_of_domain == "error":
-        raise InstabilityError(
-            f"{where(step, time)}: {len(ids)} particle(s) left the domain (guard.out_of_domain: error) "
-            f"(particle ids {ids_text(ids)})", step=step, time=time, quantity="position", particles=ids,
-            family="domain")
-    log.warning("%s: removed %d particle(s) that left the domain (ids %s); %d removed so far",
-                where(step, time), len(ids), ids_text(ids), removed_total)
-
-
-def neighbour_overflow_error(step: int, time: float, exc) -> InstabilityError:
-    return InstabilityError(f"{where(step, time)}: {exc}", step=step, time=time, quantity="neighbour count",
-                            particles=[exc.particle_id], family="bounds")
-
-
-def non_finite_error(step: int, time: float, count: int, first_id: int, what: str) -> InstabilityError:
-    return InstabilityError(
-        f"{where(step, time)}: non-finite {what} at {count} particle(s) (first particle id {first_id})",
-        step=step, time=time, quantity="non-finite state", particles=[first_id], family="nonfinite")
-
-
-def solver_failure(step: int, time: float, iterations: int, residual: float, tolerance: float,
-                   on_failure: str) -> None:
-    """The PPE's CG ended above its tolerance: stop when it diverged (non-finite residual) or when
-    isph.ppe.on_failure is `error`, else warn."""
-    diverged = not math.isfinite(residual)
-    msg = (f"{where(step, time)}: PPE solver {'diverged' if diverged else 'did not converge'} "
-           f"({iterations} iterations, relative residual {residual:.3g} > {tolerance:g})")
-    if on_failure == "error" or diverged:
-        raise InstabilityError(msg, step=step, time=time, quantity="PPE residual", family="solver")
-    log.warning(msg)
-
-
-def time_step_error(step: int, time: float, dt: float, dt_min: float, what: str) -> InstabilityError:
-    return InstabilityError(f"{where(step, time)}: the time step of {what} fell to {dt:.3g} s, below "
-                            f"timestep.min = {dt_min:g} s", step=step, time=time, quantity="time step",
-                            family="solver")
 
 
 class StabilityGuard:

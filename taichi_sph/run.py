@@ -15,20 +15,18 @@ import numpy as np
 
 from . import __version__
 from .config import resolved_yaml
+from .contract import DT_CFL, DT_FIXED, DT_FORCE, DT_LIMIT_NAMES, DT_MAX, DT_OUTPUT, DT_VISCOUS
 from .errors import InstabilityError
 from .guard import StabilityGuard, flag_field
 from .scene import build_scene, describe
+from .solvers import make_solver
 
 log = logging.getLogger("taichi_sph")
 
-DT_FIXED, DT_CFL, DT_VISCOUS, DT_FORCE, DT_MAX, DT_OUTPUT = range(6)
-#: names of the dt_limit codes, for the log and the run file
-DT_LIMIT_NAMES = {DT_FIXED: "fixed", DT_CFL: "cfl", DT_VISCOUS: "viscous", DT_FORCE: "force", DT_MAX: "max",
-                  DT_OUTPUT: "output"}
 DIAG_COLUMNS = ("time", "dt", "kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
                 "wall_seconds", "dt_limit", "free_surface", "collisions", "isolated", "drag_sum", "drag_max")
-#: columns the driver fills itself; the others come from the solver's step() (a solver may name the ones it
-#: reports in `diagnostic_names`, by default all of DIAG_COLUMNS)
+#: columns the driver fills itself; the others come from the solver's step() (the ones its
+#: `diagnostic_names` lists, contract.Solver)
 DRIVER_COLUMNS = ("time", "dt", "wall_seconds", "dt_limit")
 
 
@@ -126,7 +124,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     t_compile = _time.perf_counter()
     solver = make_solver(cfg, scene)
     stepper = TimeStepper(cfg, solver.g_abs)
-    propose = getattr(solver, "propose_dt", None)  # solvers with their own stability limits
+    propose = solver.propose_dt if solver.proposes_dt else None  # solvers with their own stability limits
 
     saved = _resume_state(solver, resume_from) if resume_from is not None else None
     if saved is None:
@@ -135,13 +133,13 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                            markers=_markers_out(scene),
                            attrs={"precision": be["precision"], "particle_mass": solver.mass, "rho_w": solver.rho_w,
                                   "n_water": solver.n_water, "support_radius": solver.re, "status": "running",
-                                  **getattr(solver, "run_attrs", {})})
+                                  **solver.run_attrs})
     else:
         writer = RunWriter.reopen(out_path, n_frames=saved["n_frames"], n_diagnostics=saved["n_diagnostics"],
                                   probe_samples=saved["probe_samples"])
         writer.set_attrs(config_yaml=resolved_yaml(cfg), status="running", exit_reason="",
                          resumed_from=f"{Path(resume_from).name} (t = {saved['t']:.6g} s)")
-    reported = getattr(solver, "diagnostic_names", DIAG_COLUMNS)
+    reported = solver.diagnostic_names
     diag = {k: [] for k in DIAG_COLUMNS if k in DRIVER_COLUMNS or k in reported}
     summary = {"out": str(out_path), "arch": be["arch"], "steps": 0, "status": "running"}
     extras = RunExtras(cfg, writer, out_path, scene.kind, solver.mass, solver.rho_w,
@@ -238,7 +236,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
         writer.set_attrs(setup_seconds=summary.get("compile_and_setup_seconds"), phase_seconds=dict(solver.timers))
         wall = _time.perf_counter() - wall0
         steps = solver.step_count
-        psps = getattr(solver, "n_fluid", solver.n_water) * steps / step_wall if step_wall > 0 else 0.0
+        psps = solver.n_fluid * steps / step_wall if step_wall > 0 else 0.0
         summary.update(steps=steps, wall_seconds=wall, step_seconds=step_wall, mipps=psps / 1e6,
                        removed_particles=solver.removed_total, phase_seconds=dict(solver.timers))
         n_limited = sum(limit_counts.values())
@@ -261,18 +259,6 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     if volume0 > 0:
         summary["volume_drift"] = last["water_volume"] / volume0 - 1.0
     return summary
-
-
-def make_solver(cfg, scene):
-    """The solver of the config's mode (each keeps the same interface: step(dt) -> diagnostics,
-    initial_diagnostics(), fields_by_id(), max_speed_bound(), timers, step_count, time, ...)."""
-    if cfg.mode == "wcsph_biot":
-        from .wcsph.solver import WCSPHSolver
-
-        return WCSPHSolver(cfg, scene)
-    from .isph.solver import ISPHSolver
-
-    return ISPHSolver(cfg, scene)
 
 
 def land_on(t: float, dt: float, limit: int, target: float) -> tuple[float, int]:
@@ -313,7 +299,8 @@ def _reference_density(solver, kind) -> np.ndarray:
     """Reference density of each particle for the guard's density ratio (air: its own, else water)."""
     from .scene import AIR
 
-    return np.where(np.asarray(kind) == AIR, getattr(solver, "rho_a", solver.rho_w), solver.rho_w)
+    return np.where(np.asarray(kind) == AIR, solver.rho_a if solver.rho_a is not None else solver.rho_w,
+                    solver.rho_w)
 
 
 def _fastest_particle(solver) -> int:

@@ -13,11 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .sph.kernels import SUPPORT_FACTOR
+from .kinds import AIR, KIND_NAMES, SOIL, WALL, WATER  # noqa: F401  (the solvers import the kinds from here)
+from .sph.support import SUPPORT_FACTOR
 from .sph.wall_motion import Motion
-
-WATER, WALL, SOIL, AIR = 0, 1, 2, 3
-KIND_NAMES = {WATER: "water", WALL: "wall", SOIL: "soil", AIR: "air"}
 
 
 @dataclass
@@ -351,9 +349,7 @@ def build_scene(cfg) -> Scene:
     position, normal = np.concatenate([position, soil]), np.concatenate([normal, np.zeros_like(soil)])
     kind = np.concatenate([kind, np.full(len(soil), SOIL, np.int8)])
     inflow_rows = []
-    if getattr(cfg, "inflow", None):  # reserve water of the river inflow, held out until released
-        from .wcsph.inflow import inflow_particles
-
+    if cfg.inflow:  # reserve water of the river inflow, held out until released (wcsph/inflow.py)
         reserve, rows = inflow_particles(cfg, wall, position[kind != WALL])
         inflow_rows = [[row + len(position) for row in src] for src in rows]
         position, normal = np.concatenate([position, reserve]), np.concatenate([normal, np.zeros_like(reserve)])
@@ -380,6 +376,24 @@ def build_scene(cfg) -> Scene:
     return Scene(dim=dim, dx=dx, position=position, kind=kind, normal=normal, lo=lo, hi=hi, tank_size=size,
                  markers=build_markers(cfg), velocity=velocity, period=period, inflow_rows=inflow_rows,
                  body=body, motions=motions)
+
+
+def inflow_particles(cfg, wall: np.ndarray, others: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Reserve particles of every inflow box (positions) and, per inflow, the rows of indices into them,
+    lowest row first (wcsph/inflow.py releases them row by row). Points within dx / 2 of a wall or
+    another particle are left out."""
+    dx = cfg.dx
+    pts_all = np.zeros((0, cfg.dim))
+    rows = []
+    for src in cfg.inflow:
+        pts = lattice_in_box(src.min, src.max, dx)
+        pts = pts[remove_overlaps(pts, wall, 0.5 * dx) & remove_overlaps(pts, others, 0.5 * dx)
+                  & remove_overlaps(pts, pts_all, 0.5 * dx)]
+        level = np.round((pts[:, -1] - pts[:, -1].min()) / dx).astype(np.int64) if len(pts) else np.zeros(0, int)
+        base = len(pts_all)
+        rows.append([base + np.nonzero(level == k)[0] for k in np.unique(level)])
+        pts_all = np.concatenate([pts_all, pts])
+    return pts_all, rows
 
 
 def taylor_green_velocity(pts: np.ndarray, size, scale: float) -> np.ndarray:

@@ -42,9 +42,6 @@ import logging
 import math
 import os
 import re
-import subprocess
-import sys
-import time as _time
 from pathlib import Path
 
 import numpy as np
@@ -55,7 +52,6 @@ from .errors import InputError
 log = logging.getLogger("taichi_sph")
 
 STATUS_BY_EXIT = {0: "completed", 2: "failed", 3: "unstable", 130: "interrupted"}
-SWEEP_KEYS = {"config", "out", "set", "grid", "cases", "workers"}
 
 
 # ---------------------------------------------------------------- command line
@@ -103,6 +99,7 @@ def parse_param(item: str) -> tuple[str, list]:
 def plan_from_args(args) -> dict:
     """The sweep as {config, raw, out, cases: [{name, params, overrides}]}, every case validated."""
     from .config.load import parse_overrides, read_yaml
+    from .config.sweep import load_sweep_file
 
     if bool(args.sweep_file) == bool(args.config):
         raise InputError("sweep needs a sweep file or --config (not both)")
@@ -112,25 +109,14 @@ def plan_from_args(args) -> dict:
     out = None
     workers = None
     if args.sweep_file:
-        spec = read_yaml(args.sweep_file)
-        unknown = sorted(set(spec) - SWEEP_KEYS)
-        if unknown:
-            raise InputError(f"sweep file '{args.sweep_file}': unknown key '{unknown[0]}' "
-                             f"(keys: {', '.join(sorted(SWEEP_KEYS))})")
-        if not isinstance(spec.get("config"), str):
-            raise InputError(f"sweep file '{args.sweep_file}': key 'config' (the case file) is required")
-        config = Path(args.sweep_file).parent / spec["config"]
-        out = spec.get("out")
-        workers = spec.get("workers")
-        if workers is not None and (not isinstance(workers, int) or isinstance(workers, bool) or workers < 1):
-            raise InputError(f"sweep file '{args.sweep_file}': key 'workers' must be a positive integer")
-        common = _mapping(spec.get("set"), args.sweep_file, "set")
-        grid = {k: (v if isinstance(v, list) else [v]) for k, v in _mapping(spec.get("grid"), args.sweep_file,
-                                                                            "grid").items()}
-        if spec.get("cases") is not None:
-            if not isinstance(spec["cases"], list) or not all(isinstance(c, dict) for c in spec["cases"]):
-                raise InputError(f"sweep file '{args.sweep_file}': key 'cases' must be a list of mappings")
-            listed = [dict(c) for c in spec["cases"]] or [{}]
+        spec = load_sweep_file(args.sweep_file)
+        config = Path(args.sweep_file).parent / spec.config
+        out = spec.out
+        workers = spec.workers
+        common = dict(spec.set or {})
+        grid = {k: (v if isinstance(v, list) else [v]) for k, v in (spec.grid or {}).items()}
+        if spec.cases is not None:
+            listed = [dict(c) for c in spec.cases] or [{}]
     else:
         config = Path(args.config)
     for item in args.param:
@@ -160,14 +146,6 @@ def plan_from_args(args) -> dict:
         case["config"] = _case_config(raw, case, config)
     return {"config": str(config), "raw": raw, "out": str(out), "cases": cases, "param_keys": _param_keys(cases),
             "workers": workers}
-
-
-def _mapping(value, path, key) -> dict:
-    if value is None:
-        return {}
-    if not isinstance(value, dict):
-        raise InputError(f"sweep file '{path}': key '{key}' must be a mapping of dotted keys")
-    return dict(value)
 
 
 def _case_name(label, params: dict, numbered: bool, k: int) -> str:
@@ -308,23 +286,21 @@ def _run_dask(specs, client):
 def run_case(spec: dict, threads: int | None = None) -> dict:
     """Run one case in its own process and return its table row (metrics from its run file). Runs
     wherever it is called: a local thread or a Dask worker."""
+    from .cli_process import run_cli
+
     env = dict(os.environ)
     env["TAICHI_SPH_PROGRESS"] = "0"
     if threads is None:
         threads = _dask_worker_threads()
     if threads is not None:
         env.setdefault("TI_CPU_MAX_NUM_THREADS", str(threads))
-    cmd = [sys.executable, "-m", "taichi_sph.cli", "run", "--config", spec["config"], "--out", spec["out"],
-           "--no-progress"]
-    t0 = _time.perf_counter()
-    with open(spec["log"], "w", encoding="utf-8") as logf:
-        proc = subprocess.run(cmd, stdout=logf, stderr=subprocess.STDOUT, env=env, check=False)
-    wall = _time.perf_counter() - t0
-    code = proc.returncode
+    res = run_cli(["run", "--config", spec["config"], "--out", spec["out"], "--no-progress"], log_path=spec["log"],
+                  env=env)
+    code = res.rc
     status = STATUS_BY_EXIT.get(code, "killed" if code < 0 else "failed")
-    cause = "" if code == 0 else _cause(spec["log"], code)
+    cause = "" if code == 0 else _cause(res, code)
     row = collect(spec, status, cause)
-    row["process_seconds"] = wall
+    row["process_seconds"] = res.seconds
     return row
 
 
@@ -339,13 +315,9 @@ def _dask_worker_threads() -> int | None:
         return None
 
 
-def _cause(log_path: str, code: int) -> str:
-    try:
-        lines = [ln.strip() for ln in Path(log_path).read_text(encoding="utf-8", errors="replace").splitlines()]
-    except OSError:
-        lines = []
-    errors = [ln for ln in lines if ln.startswith(("taichi-sph: error", "taichi-sph: unstable"))]
-    text = errors[-1] if errors else next((ln for ln in reversed(lines) if ln), "")
+def _cause(res, code: int) -> str:
+    """Why a case did not complete: the line of its output that says so (cli_process.CliRun)."""
+    text = res.failure_line()
     if code < 0:
         text = f"killed by signal {-code}" + (f"; {text}" if text else "")
     return text or f"exit code {code}"
@@ -358,7 +330,7 @@ def _row(spec, status, cause) -> dict:
 
 def collect(spec: dict, status: str, cause: str) -> dict:
     """A table row from a case's run file (metrics NaN when the file cannot be read)."""
-    from .config.schema import Metric
+    from .config.sweep import Metric
     from .io.hdf5 import RunFile, RunFileError
     from .metrics import compute
 

@@ -17,12 +17,10 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from .kinds import AIR, SOIL, WATER
+
 ISPH, WCSPH = "isph", "wcsph_biot"
 BOTH = (ISPH, WCSPH)
-
-#: kinds of particle (the values of scene.WATER, WALL, SOIL, AIR; scene.py imports taichi through its
-#: kernels, this module must not)
-_WATER, _SOIL, _AIR = 0, 2, 3
 
 
 def _switch(modes: tuple, doc: str):
@@ -76,7 +74,7 @@ class Switches:
     def build(cls, cfg, scene) -> "Switches":
         """The switches of a validated config and the scene built from it (scene.build_scene)."""
         kind = np.asarray(scene.kind)
-        n_water, n_air, n_soil = (int(np.count_nonzero(kind == k)) for k in (_WATER, _AIR, _SOIL))
+        n_water, n_air, n_soil = (int(np.count_nonzero(kind == k)) for k in (WATER, AIR, SOIL))
         common = dict(no_slip=cfg.tank.boundary == "no_slip",
                       periodic=any(v > 0.0 for v in scene.periods()),
                       moving_walls=bool(scene.motions))
@@ -123,7 +121,7 @@ def held_soil_ids(cfg, scene) -> np.ndarray:
     kind = np.asarray(scene.kind)
     if cfg.mode != WCSPH or cfg.wcsph.soil.fixed or not any(b.fixed for b in cfg.soil_blocks):
         return np.zeros(0, np.int64)
-    soil_idx = np.nonzero(kind == _SOIL)[0]
+    soil_idx = np.nonzero(kind == SOIL)[0]
     if not len(soil_idx):
         return np.zeros(0, np.int64)
     from .scene import soil_block_index

@@ -175,11 +175,3 @@ def test_compact_support_and_continuity(ti_cpu, dim):
     tw, tdw = taichi_w(np.array([h]), h, dim)
     assert tw[0] == pytest.approx(0.25 * sigma(dim, h), rel=1e-14)
     assert tdw[0] == pytest.approx(-0.75 * sigma(dim, h) / h * kernels.GRADIENT_SCALE[dim], rel=1e-14)
-
-
-def test_the_config_check_uses_the_kernel_support():
-    """The schema's pore-lattice check (no Taichi import there) uses the kernels' support radius."""
-    from taichi_sph.config.schema import KERNEL_SUPPORT
-    from taichi_sph.sph.kernels import SUPPORT_FACTOR
-
-    assert KERNEL_SUPPORT == SUPPORT_FACTOR

@@ -160,3 +160,24 @@ def test_freefall_sweep_file_plans_the_three_porosities():
     plan = plan_from_args(args)
     assert [c["config"].soil.regions[0].eps0 for c in plan["cases"]] == [0.3, 0.5, 0.8]
     assert [m.name for m in plan["cases"][0]["config"].metrics][:2] == ["arrival_time", "layer_volume_at_arrival"]
+
+
+@pytest.mark.parametrize("text, expect", [
+    ("config: a.yaml\nfoo: 1\nbar: 2\n", "unknown key 'bar' (keys: cases, config, grid, out, set, workers)"),
+    ("out: x\n", "key 'config' (the case file) is required"),
+    ("config: 3\n", "key 'config' (the case file) is required"),
+    ("config: a.yaml\nworkers: 0\n", "key 'workers' must be a positive integer"),
+    ("config: a.yaml\nworkers: true\n", "key 'workers' must be a positive integer"),
+    ("config: a.yaml\nset: [1]\n", "key 'set' must be a mapping of dotted keys"),
+    ("config: a.yaml\ngrid: 3\n", "key 'grid' must be a mapping of dotted keys"),
+    ("config: a.yaml\ncases: [1, 2]\n", "key 'cases' must be a list of mappings"),
+])
+def test_sweep_file_errors_are_one_line(tmp_path, text, expect):
+    from taichi_sph.config.sweep import load_sweep_file
+    from taichi_sph.errors import InputError
+
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    with pytest.raises(InputError) as err:
+        load_sweep_file(path)
+    assert str(err.value) == f"sweep file '{path}': {expect}"

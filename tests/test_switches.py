@@ -79,8 +79,8 @@ def _load(path, variant):
 
 @pytest.mark.parametrize("path, variant", _cases())
 def test_reported_switches_are_the_compiled_ones(ti_cpu, path, variant):
-    from taichi_sph.run import make_solver
     from taichi_sph.scene import build_scene
+    from taichi_sph.solvers import make_solver
 
     cfg = _load(path, variant)
     reported = features(cfg)  # builds its own scene, as `info --config` does

@@ -115,21 +115,12 @@ MODES = {
 
 
 # ---------------------------------------------------------------------------------------- one case (child)
-def _solver_for(cfg, scene):
-    if cfg.mode == "isph":
-        from taichi_sph.isph.solver import ISPHSolver
-
-        return ISPHSolver(cfg, scene)
-    from taichi_sph.wcsph.solver import WCSPHSolver
-
-    return WCSPHSolver(cfg, scene)
-
-
 def run_case(spec: dict) -> dict:
     """Build the scene and solver, time the first step (JIT) and then steps for `min_time` seconds."""
     from taichi_sph import backend
     from taichi_sph.config import load_config
     from taichi_sph.scene import build_scene
+    from taichi_sph.solvers import make_solver
 
     be = backend.init(spec["arch"], spec.get("precision", "auto"))
     data = MODES[spec["mode"]](spec["dim"], spec["target"])
@@ -140,10 +131,10 @@ def run_case(spec: dict) -> dict:
     cfg = load_config(data=data)
     scene = build_scene(cfg)
     t0 = time.perf_counter()
-    solver = _solver_for(cfg, scene)
+    solver = make_solver(cfg, scene)
     solver.initial_diagnostics()
     stepper = None
-    if cfg.mode != "isph":
+    if solver.proposes_dt:
         from taichi_sph.run import TimeStepper
 
         stepper = TimeStepper(cfg, solver.g_abs)
@@ -170,7 +161,7 @@ def run_case(spec: dict) -> dict:
             break
     wall = time.perf_counter() - t0
     cpu = time.process_time() - cpu0
-    n_water = getattr(solver, "n_water", None) or solver.n_fluid
+    n_water = solver.n_water or solver.n_fluid
     per_step = wall / steps
     return {
         **{k: spec[k] for k in ("mode", "dim", "size", "arch")}, "precision": be["precision"],

@@ -91,15 +91,15 @@ def main(argv=None) -> int:
 
     from taichi_sph import backend
     from taichi_sph.config import load_config
-    from taichi_sph.isph.solver import ISPHSolver
     from taichi_sph.scene import build_scene
+    from taichi_sph.solvers import make_solver
 
     be = backend.init("cpu", "auto", threads=args.threads)
     cfg = load_config(ROOT / "configs" / "dambreak.yaml", ["dt=0.0005", *args.overrides])
     assert not cfg.soil.regions and cfg.fluid.turbulence == "none"
     with tempfile.TemporaryDirectory() as tmp:
         Stripped, removed = stripped_solver_class(Path(tmp))
-        solvers = {"features present": ISPHSolver(cfg, build_scene(cfg)),
+        solvers = {"features present": make_solver(cfg, build_scene(cfg)),
                    "features absent": Stripped(cfg, build_scene(cfg))}
         for s in solvers.values():
             s.initial_diagnostics()

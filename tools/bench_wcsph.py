@@ -38,12 +38,12 @@ def bench_case(dx: float, steps: int, warmup: int, overrides=(), until: float | 
     from taichi_sph.config import load_config
     from taichi_sph.run import TimeStepper
     from taichi_sph.scene import build_scene
-    from taichi_sph.wcsph.solver import WCSPHSolver
+    from taichi_sph.solvers import make_solver
 
     cfg = load_config(ROOT / "configs" / "dambreak_wcsph.yaml", [f"dx={dx}", *overrides])
     scene = build_scene(cfg)
     t0 = time.perf_counter()
-    solver = WCSPHSolver(cfg, scene)
+    solver = make_solver(cfg, scene)
     solver.initial_diagnostics()
     stepper = TimeStepper(cfg, solver.g_abs)
     for _ in range(warmup):

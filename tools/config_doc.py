@@ -1,4 +1,4 @@
-"""Writes docs/config.md from the schema (taichi_sph/config/schema.py): each key with its type,
+"""Writes docs/config.md from the schema (the models of taichi_sph/config/): each key with its type,
 default and the `#:` comment above it. Run after changing the schema; a test checks it is current.
 
     python tools/config_doc.py [--check]
@@ -14,7 +14,9 @@ sys.path.insert(0, str(ROOT))
 
 HEADER = """# Config keys
 
-A case is a YAML file validated against `taichi_sph/config/schema.py` before anything compiles.
+A case is a YAML file validated against the models of `taichi_sph/config/` (the root is `Config` in
+`schema.py`; `taichi-sph schema` prints them as a JSON Schema, docs/config.schema.json) before anything
+compiles.
 All quantities are SI (m, s, kg, Pa). The last axis is vertical (y in 2D, z in 3D); the tank
 interior spans [0, size] on every axis. Any key can be overridden on the command line with
 `--set key=value` (nested keys with dots, list items by index), and a file may define
@@ -35,6 +37,11 @@ SECTIONS += [("Checkpoint", "checkpoint"), ("Metric", "metrics[k]")]
 SECTIONS += [("WaterBlock", "water[k] (besides min and max)"), ("Obstacle", "obstacles[k] (besides min and max)"),
              ("ObstacleMotion", "obstacles[k].motion")]
 SECTIONS += [("WCSPHSoil", "wcsph.soil"), ("SoilStartFrom", "wcsph.soil.start_from"), ("InflowSource", "inflow[k]")]
+SECTIONS += [("Soil", "soil"), ("Shape", "soil.regions[k] and soil_blocks[k]: a box or a mound"),
+             ("SoilRegion", "soil.regions[k] (besides the shape)"), ("SoilBlock", "soil_blocks[k] (besides the shape)"),
+             ("ExcessPorePressure", "wcsph.soil.initial_excess_pressure")]
+#: the modules of the config models
+MODULES = ("schema", "geometry", "isph", "wcsph", "run_options", "sweep")
 
 FOOTER = """## Fixed names
 
@@ -44,21 +51,24 @@ so `taichi-sph --config X.yaml --set dx=0.02 --set end_time=0.3 --out run.h5` wo
 
 
 def render() -> str:
-    from taichi_sph.config import schema
+    import importlib
 
-    src = inspect.getsource(schema)
-    lines = src.splitlines()
-    classes = {n.name: n for n in ast.parse(src).body if isinstance(n, ast.ClassDef)}
+    classes = {}
+    for name in MODULES:
+        src = inspect.getsource(importlib.import_module(f"taichi_sph.config.{name}"))
+        classes.update({n.name: (n, src) for n in ast.parse(src).body if isinstance(n, ast.ClassDef)})
     out = [HEADER]
     for cname, title in SECTIONS:
-        node = classes[cname]
+        node, src = classes[cname]
+        lines = src.splitlines()
         out += [f"## `{title}`", ""]
         doc = ast.get_docstring(node)
         if doc:
             out += [doc, ""]
         out += ["| key | type = default | meaning |", "|---|---|---|"]
         for item in node.body:
-            if not (isinstance(item, ast.AnnAssign) and isinstance(item.target, ast.Name)):
+            if not (isinstance(item, ast.AnnAssign) and isinstance(item.target, ast.Name)) \
+                    or item.target.id.startswith("_"):
                 continue
             comment, k = [], item.lineno - 2
             while k >= 0 and lines[k].strip().startswith("#:"):

@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
+from taichi_sph.cli_process import run_case_cli
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tools"))
-from cli_run import run_cli  # noqa: E402  (the tools folder is not a package)
 
 G = 9.81
 MODES = ("isph", "wcsph_biot")
@@ -86,7 +86,7 @@ def cells(axes=None) -> list[Cell]:
 
 def run_cell(c: Cell, workdir: Path, timeout: float) -> dict:
     out = workdir / f"{c.axis}-{c.value}-{c.mode}.h5".replace(" ", "_")
-    res = run_cli(c.config, out, c.sets, timeout=timeout)
+    res = run_case_cli(c.config, out, c.sets, timeout=timeout, cwd=ROOT)
     row = {"axis": c.axis, "value": c.value, "mode": c.mode, "sets": c.sets, "rc": res.rc,
            "outcome": CODES.get(res.rc, f"exit {res.rc}"), "seconds": res.seconds,
            "message": res.message if res.rc != 0 else ""}

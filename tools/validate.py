@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
+from taichi_sph.cli_process import run_case_cli
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tools"))
-from cli_run import run_cli  # noqa: E402  (the tools folder is not a package)
 
 DATA = ROOT / "tests" / "data"
 G = 9.81
@@ -422,7 +422,7 @@ def _dupuit(setting):
 # ------------------------------------------------------------------------------------------- running
 def run_one(run: Run, workdir: Path, timeout: float) -> dict:
     out = workdir / f"{abs(hash((run.variant, run.dx, tuple(run.sets)))):x}.h5"
-    res = run_cli(run.config, out, run.sets, run.args, timeout)
+    res = run_case_cli(run.config, out, run.sets, run.args, timeout, cwd=ROOT)
     row = {"variant": run.variant, "dx": run.dx, "rc": res.rc, "process_seconds": res.seconds, "out": str(out),
            "status": "completed" if res.rc == 0 else res.message}
     if out.exists():

@@ -27,7 +27,8 @@ _Loader.add_implicit_resolver(
     list("-+0123456789."))
 
 from ..errors import InputError
-from .schema import Config, check
+from .base import RULE_ERROR
+from .schema import Config
 
 
 def parse_overrides(items) -> list[tuple[str, object]]:
@@ -116,13 +117,21 @@ def load_config(path=None, overrides=(), variant: str | None = None, data: dict 
         cfg = Config.model_validate(raw)
     except ValidationError as exc:
         raise InputError(format_validation_error(exc, path)) from None
-    check(cfg)
     return cfg
 
 
 def format_validation_error(exc: ValidationError, path=None) -> str:
-    """One line: the first problem, naming its key, with a count of the others."""
+    """One line: the first problem, naming its key, with a count of the others. Problems of a key's own
+    type or range come before the cross-field rules (which are reported alone, without the file: the
+    first rule that fails, as "config key '<key>': <message>")."""
     errors = exc.errors()
+    plain = [e for e in errors if e.get("type") != RULE_ERROR]
+    if not plain:
+        rule = errors[0]
+        ctx = rule.get("ctx", {})
+        key = ".".join(k for k in (_loc(rule.get("loc", ())) if rule.get("loc") else "", ctx.get("key", "")) if k)
+        return f"config key '{key}': {ctx.get('message', rule.get('msg', 'invalid'))}"
+    errors = plain
     first = errors[0]
     key = _loc(first.get("loc", ()))
     kind = first.get("type", "")
@@ -147,7 +156,7 @@ def _loc(loc) -> str:
     for part in loc:
         if isinstance(part, int):
             out += f"[{part}]"
-        elif part in ("float", "constrained-float", "literal['auto']", "function-after[_ordered(), Box]"):
+        elif part in ("float", "constrained-float", "literal['auto']") or part.startswith("function-"):
             continue
         else:
             out += ("." if out else "") + str(part)

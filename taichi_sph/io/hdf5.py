@@ -32,10 +32,11 @@ from typing import Any, Iterable, Mapping
 import h5py
 import numpy as np
 
+from ..kinds import KIND_NAMES
+
 __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
-    "KIND_NAMES",
     "UNITS",
     "RunFile",
     "RunFileError",
@@ -46,8 +47,6 @@ __all__ = [
 FORMAT = "taichi-sph"
 FORMAT_VERSION = 1
 
-#: particle kind code -> name (``/particles/kind``)
-KIND_NAMES: dict[int, str] = {0: "water", 1: "wall", 2: "soil", 3: "air"}
 
 #: Units of known field, diagnostic and probe names, for 3D runs.  Names whose unit depends on
 #: the dimension (energies, volumes, masses: per metre of depth in 2D) are resolved by

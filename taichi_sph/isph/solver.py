@@ -50,6 +50,11 @@ class ISPHSolver(SolverCommon):
     diagnostic_names = ("kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
                         "free_surface", "collisions", "isolated")
 
+    @property
+    def n_fluid(self) -> int:
+        """Fluid particles a step moves: the water (mode isph has no air)."""
+        return self.n_water
+
     def __init__(self, cfg, scene):
         self.cfg = cfg
         self.dim = dim = cfg.dim

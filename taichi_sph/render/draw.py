@@ -203,7 +203,7 @@ class Drawing:
         return self.plotter.screenshot(return_img=True)
 
     def _label_kinds(self, actor) -> None:
-        from ..io.hdf5 import KIND_NAMES
+        from ..kinds import KIND_NAMES
 
         lut = actor.mapper.lookup_table
         lut.annotations = {float(k): v for k, v in KIND_NAMES.items()}

@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.hdf5 import KIND_NAMES, RunFile, unit_for
+from ..io.hdf5 import RunFile, unit_for
+from ..kinds import KIND_NAMES
 
 AXES = "xyz"
 

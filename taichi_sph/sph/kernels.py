@@ -23,8 +23,7 @@ import math
 import numpy as np
 import taichi as ti
 
-#: support radius in units of the particle spacing (SPEC 3)
-SUPPORT_FACTOR = 2.4
+from .support import SUPPORT_FACTOR
 
 
 def sigma(dim: int, h: float) -> float:

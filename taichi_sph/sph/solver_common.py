@@ -2,14 +2,27 @@
 search (cell sort, removal of particles that left the domain, reordering of every particle array)."""
 
 import time as _time
+from types import MappingProxyType
 
-from .. import guard
+from ..instability import out_of_domain
 
 
 class SolverCommon:
     """Mixin of ISPHSolver and WCSPHSolver. Expects `cfg`, `grid` (sph.grid.NeighbourGrid), `x`, `active`,
     `ids`, `n`, `particle_fields` (every per-particle field, reordered together), `timers` (dict of
-    seconds per phase), `removed_total`, `step_count` and `time`."""
+    seconds per phase), `removed_total`, `step_count` and `time`. Gives the defaults of the solver contract
+    (contract.Solver) that a mode may override."""
+
+    #: extra run-file attributes (none by default)
+    run_attrs = MappingProxyType({})
+    #: air's reference density; None: the mode has no air
+    rho_a = None
+    #: the driver's TimeStepper chooses the step unless a solver proposes its own (`propose_dt`)
+    proposes_dt = False
+
+    def propose_dt(self) -> tuple[float, int]:
+        """Only solvers with `proposes_dt` choose their own time step."""
+        raise NotImplementedError(f"{type(self).__name__} does not choose its time step (proposes_dt is False)")
 
     def _tick(self, key: str, t0: float) -> float:
         """Add the time since t0 to phase `key`; return now (the start of the next phase)."""
@@ -18,13 +31,13 @@ class SolverCommon:
         return t1
 
     def _sort_and_reorder(self) -> None:
-        """Counting sort into the cells; particles outside the grid are taken out, counted, and reported to
-        the guard (which stops the run or warns, per `guard.out_of_domain`); then every particle array is
-        put in cell order (memory locality of the neighbour loops)."""
+        """Counting sort into the cells; particles outside the grid are taken out, counted, and reported
+        to instability.out_of_domain (which stops the run or warns, per `guard.out_of_domain`); then every
+        particle array is put in cell order (memory locality of the neighbour loops)."""
         removed = self.grid.sort(self.x, self.active, self.n)
         if len(removed):
             ids = self.ids.to_numpy()[removed]
             self.removed_total += len(removed)
-            guard.out_of_domain(self.cfg, self.step_count, self.time, ids, self.removed_total)
+            out_of_domain(self.cfg, self.step_count, self.time, ids, self.removed_total)
         for f in self.particle_fields:
             self.grid.reorder(f, self.n)

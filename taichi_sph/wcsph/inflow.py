@@ -2,40 +2,19 @@
 level rises behind a levee (seed 002 section 3.5: the river side rises, then stays).
 
 Each inflow is a source box above the river, filled with water particles on the dx lattice that are held
-out of the simulation (inactive) at the start. They are released one lattice row at a time, lowest row
-first, so that the volume released by time t is rate (t - start) rounded down to whole rows (a row holds
-its particle count times dx^dim of water), until the box is empty. A released particle starts at rest,
-at the water's reference density, at its lattice place, and falls into the river: the river level rises
-at rate / (width of the river) once the stream has reached it. Mass enters, momentum does not (the
-particles start at rest), so the fall releases only the potential energy of the source's height: keep the
-box low above the highest river level. Release times are a function of the simulated time alone, so a
-resumed run releases the same rows at the same steps.
+out of the simulation (inactive) at the start (scene.inflow_particles places them). They are released one
+lattice row at a time, lowest row first, so that the volume released by time t is rate (t - start)
+rounded down to whole rows (a row holds its particle count times dx^dim of water), until the box is
+empty. A released particle starts at rest, at the water's reference density, at its lattice place, and
+falls into the river: the river level rises at rate / (width of the river) once the stream has reached
+it. Mass enters, momentum does not (the particles start at rest), so the fall releases only the potential
+energy of the source's height: keep the box low above the highest river level. Release times are a
+function of the simulated time alone, so a resumed run releases the same rows at the same steps.
 """
 
 from __future__ import annotations
 
 import numpy as np
-
-from ..scene import lattice_in_box
-
-
-def inflow_particles(cfg, wall: np.ndarray, others: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Reserve particles of every inflow box (positions) and, per inflow, the rows of indices into them,
-    lowest row first. Points within dx / 2 of a wall or another particle are left out."""
-    from ..scene import remove_overlaps
-
-    dx = cfg.dx
-    pts_all = np.zeros((0, cfg.dim))
-    rows = []
-    for src in getattr(cfg, "inflow", []):
-        pts = lattice_in_box(src.min, src.max, dx)
-        pts = pts[remove_overlaps(pts, wall, 0.5 * dx) & remove_overlaps(pts, others, 0.5 * dx)
-                  & remove_overlaps(pts, pts_all, 0.5 * dx)]
-        level = np.round((pts[:, -1] - pts[:, -1].min()) / dx).astype(np.int64) if len(pts) else np.zeros(0, int)
-        base = len(pts_all)
-        rows.append([base + np.nonzero(level == k)[0] for k in np.unique(level)])
-        pts_all = np.concatenate([pts_all, pts])
-    return pts_all, rows
 
 
 class Inflow:

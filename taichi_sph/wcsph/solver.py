@@ -37,6 +37,7 @@ import taichi as ti
 
 from .. import guard
 from ..backend import is_f64
+from ..contract import DT_CFL, DT_FORCE, DT_VISCOUS
 from ..scene import AIR, SOIL, WALL, WATER
 from ..sph import kernels, operators
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
@@ -50,8 +51,6 @@ from .soil_step import SoilStep
 
 log = logging.getLogger("taichi_sph")
 
-#: dt_limit codes, shared with run.py (1 acoustic CFL, 2 viscous, 3 force)
-DT_CFL, DT_VISCOUS, DT_FORCE = 1, 2, 3
 #: smoothing length bounds of eq 52, in units of h0 (the neighbour grid is sized for the upper one)
 H_MIN, H_MAX = 0.5, 1.1
 #: reductions returned by the force pass
@@ -68,6 +67,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
 
     #: per-step diagnostics this solver reports (run.py adds time, dt, wall_seconds, dt_limit)
     diagnostic_names = ("kinetic_energy", "max_speed", "water_volume")
+    #: the step is eq 49's, from the forces of the last step (propose_dt)
+    proposes_dt = True
 
     def __init__(self, cfg, scene):
         self.cfg = cfg
