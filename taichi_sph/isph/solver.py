@@ -90,6 +90,7 @@ class ISPHSolver(SolverCommon):
         # surface test in and next to the ground: the count's candidates confirmed by an empty cone
         self.ground_cone = sw.ground_cone
         self.cone_cos = math.cos(math.radians(cfg.isph.ground_surface_cone))
+        self.ground_beta = float(cfg.isph.ground_surface_density)
         self.shifting = sw.shifting
         self.shift_a = cfg.isph.shifting
         self.shift_max = cfg.isph.shifting_max * dx
@@ -406,6 +407,10 @@ class ISPHSolver(SolverCommon):
                                 d = -operators.rel(xi, self.x[j], self.period)
                                 if d.dot(n_out) >= self.cone_cos * d.norm():
                                     is_free = 0
+                    # draining ground: scattered pore water with air between, a deficit of number
+                    # density with no empty cone (isph.ground_surface_density)
+                    if self.rho_n[i] < self.ground_beta * self.eps[i] * self.rho_w * self.rest_fill[i]:
+                        is_free = 1
                     self.free[i] = is_free
 
     @ti.kernel
