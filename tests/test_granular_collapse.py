@@ -18,7 +18,7 @@ def test_tall_column_deposit_matches_the_rods(run_cli, tmp_path):
     Spreads: time step halved (cfl 0.125) -11.8 % and -10.8 %; the front's threshold doubled (3 mm) +1.7 %;
     at dx 0.005 -0.2 % and -7.9 % (cfl 0.125: +14.0 %, -7.2 %); docs/biot.md, "Granular column collapse".
     Bounds: run-out within 15 % (the acceptance number; the measured values span -11.8..+2.7 % over the two
-    time steps); height within 12 % (the acceptance 10 % holds at the validation's finer resolutions; this
+    time steps); height within 12 % (the acceptance 10 % holds for this a at dx 0.005 and 0.0025; this
     coarse case sits at -10.0 / -10.8 % for the two time steps, and rises by 2 % to dx 0.005); at rest below
     5 mm/s (still flowing: > 5 cm/s)."""
     out = tmp_path / "tall.h5"
