@@ -299,7 +299,8 @@ def test_terzaghi_consolidation(run_cli, tmp_path):
     rho_w c0^2 = 40 M, so the model's own c_v, k / (rho_w g (1 / M + 1 / K_f)), is 0.976 of it. u_e is the
     water pressure minus that of the same run without the excess (the model's own hydrostatic state). Measured,
     largest |u_e / u0 - exact| over the soil at Tv 0.05 / 0.1 / 0.2 / 0.5: 0.033 / 0.034 / 0.019 / 0.003
-    (at K_f = 20 M: 0.027 / 0.028 / 0.031 / 0.003). Bound 0.05, the acceptance value ("within 5 %" of u0). With the water's c0 = 20 m/s (K_f = 0.3 M) the layer consolidates at 0.23 of Terzaghi's c_v; with
+    (at K_f = 20 M: 0.027 / 0.028 / 0.031 / 0.003). Bound 0.05, the acceptance value ("within 5 %" of u0).
+    With the water's c0 = 20 m/s (K_f = 0.3 M) the layer consolidates at 0.23 of Terzaghi's c_v; with
     the soil started at rest instead of at its settlement rate an undrained wave of 0.2-0.4 u0 rings through
     the first isochrones (0.14 at Tv 0.05)."""
     out, base = tmp_path / "c.h5", tmp_path / "c0.h5"
@@ -334,6 +335,7 @@ def test_soft_pore_water_warns_and_is_recorded(run_cli, tmp_path):
     with h5py.File(stiff) as f:
         assert f.attrs["pore_water_modulus_ratio"] == pytest.approx(40.0, rel=1e-9)
     r3 = run_cli("--config", "configs/consolidation.yaml", "--set", "end_time=0.0005", "--set",
-                 f"wcsph.water.sound_speed={(20.0 * m / 1000.0) ** 0.5!r}", "--out", tmp_path / "k20.h5", "--no-progress")
+                 f"wcsph.water.sound_speed={(20.0 * m / 1000.0) ** 0.5!r}", "--out", tmp_path / "k20.h5",
+                 "--no-progress")
     assert r3.returncode == 0, r3.stderr
     assert "wcsph.water.sound_speed" in r3.stderr, r3.stderr

@@ -64,7 +64,8 @@ def one(case: str, ratio: str, sim_time: float, warmup: int) -> dict:
     sim = solver.time - t_start
     c0 = solver.c_w
     return {"case": case, "ratio": ratio, "kf_over_m": cfg.fluid.density * c0**2 / m, "c0": c0, "M": m,
-            "particles": solver.n, "steps_per_s": steps / sim, "wall_per_s": wall / sim, "cpu_per_s": cpu / sim, "steps": steps}
+            "particles": solver.n, "steps_per_s": steps / sim, "wall_per_s": wall / sim, "cpu_per_s": cpu / sim,
+            "steps": steps}
 
 
 def main():
@@ -90,14 +91,16 @@ def main():
                 r["round"] = rnd
                 rows.append(r)
                 print(f"{case} round {rnd}: ratio {ratio} (K_f/M {r['kf_over_m']:.3g}, c0 {r['c0']:.1f} m/s, "
-                      f"{r['particles']} particles): {r['steps_per_s']:.0f} steps, {r['wall_per_s']:.1f} s wall, {r['cpu_per_s']:.1f} s CPU "
+                      f"{r['particles']} particles): {r['steps_per_s']:.0f} steps, {r['wall_per_s']:.1f} s wall, "
+                      f"{r['cpu_per_s']:.1f} s CPU "
                       f"per simulated s", flush=True)
         base = args.ratios[0]
         for rnd in range(args.repeat):
             b = next(r for r in rows if r["case"] == case and r["round"] == rnd and r["ratio"] == base)
             for r in rows:
                 if r["case"] == case and r["round"] == rnd and r["ratio"] != base:
-                    print(f"{case} round {rnd}: {r['ratio']} / {base}: steps x{r['steps_per_s'] / b['steps_per_s']:.2f}, "
+                    print(f"{case} round {rnd}: {r['ratio']} / {base}: "
+                          f"steps x{r['steps_per_s'] / b['steps_per_s']:.2f}, "
                           f"wall x{r['wall_per_s'] / b['wall_per_s']:.2f}, CPU x{r['cpu_per_s'] / b['cpu_per_s']:.2f}")
 
 
