@@ -211,6 +211,21 @@ def test_friction_keys_rejected(soil_keys, key, words):
     assert f"'{key}'" in str(exc.value) and words in str(exc.value), str(exc.value)
 
 
+def _check_slope(run_cli, tmp_path, beta, slides, *args):
+    """configs/infinite_slope.yaml tilted to beta degrees (gravity rotated) with the extra CLI `args`: the
+    layer's mean down-slope speed is above 1 cm/s if it `slides`, below 1 mm/s if it stands."""
+    b = math.radians(beta)
+    out = tmp_path / "slope.h5"
+    r = run_cli("--config", "configs/infinite_slope.yaml", *args, "--set",
+                f"gravity=[{G * math.sin(b):.8f}, {-G * math.cos(b):.8f}]", "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    speed = _layer_speed(out)
+    if slides:
+        assert speed > 0.01, speed
+    else:
+        assert abs(speed) < 1e-3, speed
+
+
 def _layer_speed(path):
     """Mean down-slope speed of the soil layer at the last frame (m/s)."""
     with RunFile(path) as rf:
@@ -237,16 +252,7 @@ def test_infinite_slope_slides_above_the_non_dilatant_angle(run_cli, tmp_path, p
     33.7 deg); a standing layer comes to rest under the damping, a sliding one runs at ~(g sin(beta) -
     tau_f / (rho H)) / damping. Bounds: standing below 1 mm/s, sliding above 1 cm/s. At 28 deg with phi
     30 (below phi, above phi*) the layer slides at 0.054 m/s."""
-    b = math.radians(beta)
-    out = tmp_path / "slope.h5"
-    r = run_cli("--config", "configs/infinite_slope.yaml", "--set", phi_keys, "--set",
-                f"gravity=[{G * math.sin(b):.8f}, {-G * math.cos(b):.8f}]", "--out", out, "--no-progress")
-    assert r.returncode == 0, r.stderr
-    speed = _layer_speed(out)
-    if slides:
-        assert speed > 0.01, speed
-    else:
-        assert abs(speed) < 1e-3, speed
+    _check_slope(run_cli, tmp_path, beta, slides, "--set", phi_keys)
 
 
 @pytest.mark.parametrize("beta, slides", [(29.0, False), (31.0, True)])
@@ -258,16 +264,7 @@ def test_infinite_slope_with_associated_flow_slides_at_phi(run_cli, tmp_path, be
     mm/s for ~0.6 s while it dilates (top +3 mm), then 5e-5 m/s at 0.9 s; 31 deg: 0.062 m/s at 0.9 s,
     dilating throughout (top +2.3 cm). With phi = 40 and psi = 40: 1e-5 m/s at 39 deg, 0.048 m/s at 41 deg
     (docs/biot.md). Bounds: standing below 1 mm/s, sliding above 1 cm/s, as the non-dilatant test."""
-    b = math.radians(beta)
-    out = tmp_path / "slope.h5"
-    r = run_cli("--config", "configs/infinite_slope.yaml", "--variant", "associated", "--set",
-                f"gravity=[{G * math.sin(b):.8f}, {-G * math.cos(b):.8f}]", "--out", out, "--no-progress")
-    assert r.returncode == 0, r.stderr
-    speed = _layer_speed(out)
-    if slides:
-        assert speed > 0.01, speed
-    else:
-        assert abs(speed) < 1e-3, speed
+    _check_slope(run_cli, tmp_path, beta, slides, "--variant", "associated")
 
 
 def test_dry_column_collapse(run_cli, tmp_path):

@@ -399,18 +399,20 @@ class ISPHSolver(SolverCommon):
                     is_free = 0
                     gn = gsum.norm()
                     if candidate and gn > 0.0:
-                        n_out = -gsum / gn
                         is_free = 1
-                        for k in range(self.grid.nbr_count[i]):
-                            j = self.grid.nbr[i, k]
-                            if self._present(j) and n_water > self.dim:
-                                d = -operators.rel(xi, self.x[j], self.period)
-                                if d.dot(n_out) >= self.cone_cos * d.norm():
-                                    is_free = 0
+                        if n_water > self.dim:
+                            n_out = -gsum / gn
+                            for k in range(self.grid.nbr_count[i]):
+                                j = self.grid.nbr[i, k]
+                                if self._present(j):
+                                    d = -operators.rel(xi, self.x[j], self.period)
+                                    if d.dot(n_out) >= self.cone_cos * d.norm():
+                                        is_free = 0
                     # draining ground: scattered pore water with air between, a deficit of number
                     # density with no empty cone (isph.ground_surface_density)
-                    if self.rho_n[i] < self.ground_beta * self.eps[i] * self.rho_w * self.rest_fill[i]:
-                        is_free = 1
+                    if ti.static(self.ground_beta > 0.0):
+                        if self.rho_n[i] < self.ground_beta * self.eps[i] * self.rho_w * self.rest_fill[i]:
+                            is_free = 1
                     self.free[i] = is_free
 
     @ti.kernel
