@@ -238,17 +238,18 @@ class Obstacle(Box):
 class PPESolver(Strict):
     #: sparse_cg: matrix assembled with ti.linalg.SparseMatrixBuilder, solved by SparseCG (Eigen CG
     #: on CPU); ell_pcg: matrix in ELL form in Taichi fields, Jacobi-preconditioned CG in Taichi
-    #: kernels (measured faster: docs/performance.md)
-    type: Literal["sparse_cg", "ell_pcg"] = "ell_pcg"
+    #: kernels; mg_pcg: the same ELL matrix, CG preconditioned by a multigrid V-cycle on the
+    #: neighbour grid's cells (iterations nearly independent of size; docs/performance.md)
+    type: Literal["sparse_cg", "ell_pcg", "mg_pcg"] = "ell_pcg"
     #: relative residual |b - A p| / |b| to reach
     tolerance: PosFloat = 1.0e-8
     max_iterations: PosInt = 2000
     #: what to do when CG stops before the tolerance: stop the run, or record and go on
     on_failure: Literal["error", "warn"] = "error"
-    #: ell_pcg only: floats of the matrix and CG vectors; auto = f64 when the tolerance is below
+    #: ell_pcg and mg_pcg only: floats of the matrix and CG vectors; auto = f64 when the tolerance is below
     #: 1e-5 (f32 CG stalls near 1e-5 relative residual), else the run's precision
     precision: Literal["auto", "f32", "f64"] = "auto"
-    #: ell_pcg only: off-diagonal entries a row can hold (default: 1.5 x the kernel's lattice
+    #: ell_pcg and mg_pcg only: off-diagonal entries a row can hold (default: 1.5 x the kernel's lattice
     #: neighbour count, 30 in 2D and 84 in 3D, at most `neighbours.max`); a row that needs more
     #: widens the matrix during the run (with a warning)
     width: Optional[PosInt] = None
@@ -1050,12 +1051,12 @@ F32_PPE_TOLERANCE = 1.0e-5
 
 
 def _check_ppe(cfg: Config) -> None:
-    """isph.ppe: the ELL-only keys need type ell_pcg; f32 cannot reach a tolerance below 1e-5."""
+    """isph.ppe: the ELL-only keys need type ell_pcg or mg_pcg; f32 cannot reach a tolerance below 1e-5."""
     ppe = cfg.isph.ppe
-    if ppe.type != "ell_pcg":
+    if ppe.type not in ("ell_pcg", "mg_pcg"):
         for key in ("precision", "width"):
             if key in ppe.model_fields_set:
-                _fail(f"isph.ppe.{key}", f"applies to isph.ppe.type ell_pcg only (type is {ppe.type})")
+                _fail(f"isph.ppe.{key}", f"applies to isph.ppe.type ell_pcg and mg_pcg only (type is {ppe.type})")
     elif ppe.precision == "f32" and ppe.tolerance < F32_PPE_TOLERANCE:
         _fail("isph.ppe.precision", f"f32 conjugate gradient stalls near a relative residual of "
               f"{F32_PPE_TOLERANCE:g}; raise isph.ppe.tolerance ({ppe.tolerance:g}) or use f64")
