@@ -48,8 +48,8 @@ the restriction and the prolongation inside the first post-smoothing sweep, so a
 loops with five matrix-vector products in all. Levels of fewer than SERIAL_BELOW cells run together
 in one serial kernel (on a CPU a parallel loop costs tens of microseconds to dispatch, more than
 their work), the others one parallel kernel per level and direction. One CG iteration is then
-`_k_iterate_mg` (p = z + beta p, A p with p.Ap, x and r updates with |r|^2) and the V-cycle's
-kernels, the last of which returns nothing to the host (r.z and beta stay on the device).
+the V-cycle's kernels (z = B r; r.z and beta stay on the device) and `_k_iterate_mg` (p = z + beta p,
+A p with p.Ap, x and r updates, |r|^2 returned to the host).
 The hierarchy is rebuilt in every solve (`_prepare`): rows binned by cell (a counting sort, serial on
 CPU so that the order and the sums are deterministic), the Galerkin products and the weights; its cost
 is in `last_setup_seconds`.
@@ -147,6 +147,7 @@ class MGPCG(EllPCG):
             n_par += 1
         self.n_par = n_par
         self._serial_scatter = _is_cpu_arch(ti.lang.impl.current_cfg().arch)
+        self._fresh = True
         self.last_setup_seconds = 0.0
 
     def with_width(self, max_nb: int) -> "MGPCG":
@@ -567,16 +568,15 @@ class MGPCG(EllPCG):
         return out
 
     def _restart(self):
-        bb, rr = (float(v) for v in self._k_residual_plain())
-        if bb > 0.0 and math.isfinite(bb):
-            self._vcycle(1)
-        return bb, rr
+        self._fresh = True
+        return tuple(float(v) for v in self._k_residual_plain())
 
     def _iterate(self) -> float:
-        rr = float(self._k_iterate_mg())
-        if rr > 0.0:
-            self._vcycle(0)
-        return rr
+        # the V-cycle at the start of an iteration, on the r it needs: none is spent after the last
+        # iteration or on the final check of the true residual
+        self._vcycle(1 if self._fresh else 0)
+        self._fresh = False
+        return float(self._k_iterate_mg())
 
     # ------------------------------------------------------------------ host helpers (tests, tools)
     def apply(self, r) -> np.ndarray:
