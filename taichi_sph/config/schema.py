@@ -239,8 +239,9 @@ class PPESolver(Strict):
     #: sparse_cg: matrix assembled with ti.linalg.SparseMatrixBuilder, solved by SparseCG (Eigen CG
     #: on CPU); ell_pcg: matrix in ELL form in Taichi fields, Jacobi-preconditioned CG in Taichi
     #: kernels; mg_pcg: the same ELL matrix, CG preconditioned by a multigrid V-cycle on the
-    #: neighbour grid's cells (iterations nearly independent of size; docs/performance.md)
-    type: Literal["sparse_cg", "ell_pcg", "mg_pcg"] = "ell_pcg"
+    #: neighbour grid's cells (iterations nearly independent of size; measured fastest:
+    #: docs/performance.md)
+    type: Literal["sparse_cg", "ell_pcg", "mg_pcg"] = "mg_pcg"
     #: relative residual |b - A p| / |b| to reach
     tolerance: PosFloat = 1.0e-8
     max_iterations: PosInt = 2000
