@@ -180,6 +180,17 @@ class MGPCG(EllPCG):
         return cc
 
     @ti.func
+    def _coords1(self, c):
+        """Cell coordinates of level-1 cell c, its grid's size known at compile time (divisions by
+        constants: the Galerkin product at level 1 takes them once per matrix entry)."""
+        cc = ti.Vector.zero(ti.i32, self.dim)
+        rest = c
+        for a in ti.static(range(self.dim - 1, -1, -1)):
+            cc[a] = rest % ti.static(self.dims[0][a])
+            rest = rest // ti.static(self.dims[0][a])
+        return cc
+
+    @ti.func
     def _lin(self, l, cc):
         lin = 0
         for a in ti.static(range(self.dim)):
@@ -307,18 +318,19 @@ class MGPCG(EllPCG):
                 l1 += ti.abs(self.vals[i, k])
             self.inv_diag[i] = self._weight(d, l1)
         for c in range(ti.static(self.ncells[0])):
-            cc = self._coords(0, c)
+            cc = self._coords1(c)
             for k in range(self.S):
                 self.st[c, k] = zero
             for q in range(self.cstart[c], self.cstart[c + 1]):
                 i = self.rlist[q]
-                self.st[c, ti.static(self.center)] += self.diag[i]
+                # (row c belongs to this iteration alone: a plain read and write, no atomic add)
+                self.st[c, ti.static(self.center)] = self.st[c, ti.static(self.center)] + self.diag[i]
                 for k in range(ti.min(self.count[i], self.max_nb)):
                     cj = self.agg[self.cols[i, k]]
                     if cj >= 0:
-                        slot = self._slot(0, cc, self._coords(0, cj))
+                        slot = self._slot(0, cc, self._coords1(cj))
                         if slot >= 0:
-                            self.st[c, slot] += self.vals[i, k]
+                            self.st[c, slot] = self.st[c, slot] + self.vals[i, k]
                         else:
                             ti.atomic_add(self.far_pairs[None], 1)
 
@@ -346,7 +358,7 @@ class MGPCG(EllPCG):
                         if v != 0:
                             nc = self._ncoords(l, fc, k)
                             slot = self._slot(l + 1, CC, nc // 2)
-                            self.st[cb + C, slot] += v
+                            self.st[cb + C, slot] = self.st[cb + C, slot] + v  # (row cb + C: this iteration's)
 
     @ti.kernel
     def _k_weights(self):
