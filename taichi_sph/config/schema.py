@@ -240,7 +240,7 @@ class PPESolver(Strict):
     #: on CPU); ell_pcg: matrix in ELL form in Taichi fields, Jacobi-preconditioned CG in Taichi
     #: kernels; mg_pcg: the same ELL matrix, CG preconditioned by a multigrid V-cycle on the
     #: neighbour grid's cells (iterations nearly independent of size: 1.7-4.7x faster steps in 2D
-    #: from 10k to 200k particles, but 15 % slower on the 3D free fall of 8000; docs/performance.md)
+    #: from 10k to 200k particles, but 24 % slower on the 3D free fall of 8000; docs/performance.md)
     type: Literal["sparse_cg", "ell_pcg", "mg_pcg"] = "ell_pcg"
     #: relative residual |b - A p| / |b| to reach
     tolerance: PosFloat = 1.0e-8
