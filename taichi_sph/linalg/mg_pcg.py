@@ -29,9 +29,10 @@ convergent smoother whatever the row), COARSEST_SWEEPS sweeps on the coarsest le
 correction over-corrected by OVERCORRECTION: a piecewise-constant P makes P^T A P about twice as
 stiff, per halving, as the operator the coarse grid should have, and scaling its correction by 2
 restores the convergence of the cycle (aggregation with over-correction: Blaheta 1986; Braess 1995).
-Measured on jittered-lattice PPEs (scipy prototype and tests/test_mg_pcg.py): PCG iterations to 1e-8
-15 / 15 / 15 / 17 for 2.5k / 10k / 40k / 160k rows in 2D, 13 / 14 / 16 / 20 for 1.7k / 8k / 33k / 125k
-in 3D; without over-correction 26 / 37 / 54 in 2D.
+Measured on the jittered-lattice PPEs of tools/bench_ppe.py: PCG iterations to 1e-8 from zero
+15 / 17 / 17 at 10k / 50k / 200k rows in 2D, 16 / 16 / 18 in 3D (Jacobi-PCG: 354 / 822 / - and
+100 / 158 / -); the same cycle without over-correction, computed in scipy: 26 / 37 / 54 at 2.5k / 10k /
+40k rows in 2D.
 
 Why the V-cycle is a symmetric positive definite preconditioner (CG needs one): Jacobi is symmetric,
 the post-smoothing repeats the pre-smoothing, R = P^T, and the coarse solve is itself such a cycle (a
