@@ -46,7 +46,8 @@ def test_vcycle_is_symmetric_positive_definite(ti_cpu, shape):
     scale = np.abs(B).max()
     asym = np.abs(B - B.T).max() / scale
     eig = np.linalg.eigvalsh(0.5 * (B + B.T))
-    print(f"{shape}: {n} rows, {mg.m} cell levels, asymmetry {asym:.2e}, eigenvalues {eig.min():.3e} .. {eig.max():.3e}")
+    print(f"{shape}: {n} rows, {mg.m} cell levels, asymmetry {asym:.2e}, "
+          f"eigenvalues {eig.min():.3e} .. {eig.max():.3e}")
     assert asym <= 1e-12
     assert eig.min() > 0.0
     rng = np.random.default_rng(5)

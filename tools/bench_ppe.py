@@ -282,7 +282,8 @@ def markdown(results, info) -> str:
     for r in results:
         for scenario in ("cold", "warm"):
             e, m = r[scenario]["ell"], r[scenario]["mg"]
-            lines.append(f"| {r['dim']}D {r['case']} | {scenario} | {r['rows']} | {e['iterations']} / {m['iterations']} "
+            lines.append(f"| {r['dim']}D {r['case']} | {scenario} | {r['rows']} "
+                         f"| {e['iterations']} / {m['iterations']} "
                          f"| {e['solve']:.4f} | {m['setup']:.4f} | {m['solve']:.4f} | {e['solve'] / m['solve']:.2f} "
                          f"| {e['residual']:.1e} / {m['residual']:.1e} |")
     return "\n".join(lines)

@@ -94,7 +94,8 @@ print(json.dumps({"water_particles": int(water.sum()), "steps": len(dts), "simul
 def run_ours(mode: str, ppe: str, dx: float, until: float, threads: int) -> dict:
     overrides = []
     if mode == "isph":
-        overrides = ["mode=isph", "dt=auto", "timestep.cfl=0.2", f"timestep.initial_speed={math.sqrt(2 * G * HEIGHT):.3f}",
+        overrides = ["mode=isph", "dt=auto", "timestep.cfl=0.2",
+                     f"timestep.initial_speed={math.sqrt(2 * G * HEIGHT):.3f}",
                      f"isph.ppe.type={ppe}", "isph.ppe.max_iterations=20000"]
     env = dict(os.environ, TI_CPU_MAX_NUM_THREADS=str(threads), TI_LOG_LEVEL="error")
     r = subprocess.run([sys.executable, "-c", CHILD, mode, ppe, str(dx), str(until), str(threads), str(WARMUP),
@@ -155,7 +156,8 @@ def main(argv=None) -> int:
             rel = f"{100 * (r['front_x'] / ref['front_x'] - 1):+.2f} %" if ref else ""
             it = f"{r['cg_iterations_mean']:.1f}" if r.get("cg_iterations_mean") else ""
             print(f"| {dx:g} | {r['code']} | {r['water_particles']} | {r['steps']} | {1e3 * r['dt_min']:.4f} / "
-                  f"{1e3 * r['dt_max']:.4f} | {r['wall_seconds']:.1f} | {per:.1f} | {it} | {r['front_x']:.3f} | {rel} |")
+                  f"{1e3 * r['dt_max']:.4f} | {r['wall_seconds']:.1f} | {per:.1f} | {it} | {r['front_x']:.3f} "
+                  f"| {rel} |")
     if args.json:
         Path(args.json).write_text(json.dumps({"machine": machine(), "threads": args.threads, "load_average": load0,
                                                "until": args.until, "rows": rows}, indent=2))

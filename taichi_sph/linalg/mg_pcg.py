@@ -56,7 +56,6 @@ CPU so that the order and the sums are deterministic), the Galerkin products and
 is in `last_setup_seconds`.
 """
 
-import itertools
 import math
 import time
 
@@ -493,7 +492,8 @@ class MGPCG(EllPCG):
         for c in range(self.lev_start[l + 1] - base):
             y = ti.cast(0, self.dtype)
             if self.w[base + c] != 0:
-                y = src[base + c] + self.w[base + c] * (self.gb[base + c] - self._g_av(l, base, src, c, self._coords(l, c)))
+                av = self._g_av(l, base, src, c, self._coords(l, c))
+                y = src[base + c] + self.w[base + c] * (self.gb[base + c] - av)
             dst[base + c] = y
 
     @ti.kernel
