@@ -52,8 +52,8 @@ class Switches:
     shifting: bool | None = _switch((ISPH,), "particle shifting (isph.shifting > 0)")
     collisions: bool | None = _switch((ISPH,), "collision handling (isph.collision_distance > 0)")
     free_surface: bool | None = _switch((ISPH,), "free-surface detection, eq 34 (n_surf > 0)")
-    ppe_ell: bool | None = _switch((ISPH,), "ELL matrix and Jacobi-PCG for the PPE (isph.ppe.type: "
-                                            "ell_pcg); else the sparse builder")
+    ppe_ell: bool | None = _switch((ISPH,), "ELL matrix for the PPE (isph.ppe.type: ell_pcg, Jacobi-PCG, "
+                                            "or mg_pcg, multigrid-PCG); else the sparse builder")
     # ---- mode wcsph_biot
     air: bool | None = _switch((WCSPH,), "the scene has air particles")
     cohesion: bool | None = _switch((WCSPH,), "eq 54 cohesion of water or air (a cohesion above zero and "
@@ -92,7 +92,7 @@ class Switches:
                        shifting=i.shifting > 0,
                        collisions=i.collision_distance > 0,
                        free_surface=cfg.n_surf() > 0,
-                       ppe_ell=i.ppe.type == "ell_pcg")
+                       ppe_ell=i.ppe.type in ("ell_pcg", "mg_pcg"))
         w = cfg.wcsph
         air = n_air > 0
         sp = w.soil

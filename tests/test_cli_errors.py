@@ -83,7 +83,7 @@ CASES = [
     case("inflow-rate-zero", ["--set", "inflow=[{min: [0.0, 0.3], max: [0.1, 0.4], rate: 0}]"],
          ["'inflow[0].rate'", "greater than 0"]),
     case("ppe-width-with-sparse-cg", ["--set", "isph.ppe.type=sparse_cg", "--set", "isph.ppe.width=40"],
-         ["'isph.ppe.width'", "ell_pcg only"]),
+         ["'isph.ppe.width'", "ell_pcg and mg_pcg only"]),
     case("ppe-f32-tolerance-unreachable", ["--set", "isph.ppe.precision=f32"], ["'isph.ppe.precision'", "f32"]),
     case("dim-4", ["--set", "dim=4"], ["'dim'"]),
     case("water-block-outside-tank", ["--config", "{tmp}/outside.yaml"], ["'water[0]'", "outside the tank"],

@@ -19,11 +19,11 @@ from taichi_sph.sph import kernels
 TOL = 1.0e-8
 
 
-def sph_lattice_ppe(shape, dx=0.01, jitter=0.1, seed=0):
+def sph_lattice_ppe(shape, dx=0.01, jitter=0.1, seed=0, positions=False):
     """PPE matrix of a water patch at rest: jittered lattice, cubic-spline Laplacian pair weights
     K_ij = -2 dx^d r dW/dr / (r^2 + eta^2) (kernels.py, support 2.4 dx), Dirichlet rows for the top two
     layers (their columns moved to the right-hand side), no entries across the other sides (Neumann).
-    Returns (A csr, b)."""
+    Returns (A csr, b), and the particle positions with `positions`."""
     rng = np.random.default_rng(seed)
     dim = len(shape)
     grids = np.meshgrid(*[np.arange(s) for s in shape], indexing="ij")
@@ -45,7 +45,7 @@ def sph_lattice_ppe(shape, dx=0.01, jitter=0.1, seed=0):
     vals = np.concatenate([-k[keep], -k[keep], diag])
     A = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
     b = np.where(dirichlet, 0.0, -(1.0 + 0.5 * rng.random(n)))
-    return A, b
+    return (A, b, x) if positions else (A, b)
 
 
 def random_spd(n=600, degree=8, seed=1):

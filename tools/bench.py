@@ -252,7 +252,7 @@ def main(argv=None) -> int:
     ap.add_argument("--dims", nargs="+", type=int, default=[2, 3], choices=[2, 3])
     ap.add_argument("--sizes", nargs="+", default=list(SIZES), choices=list(SIZES))
     ap.add_argument("--arch", nargs="+", default=["cpu"], choices=["cpu", "cuda"])
-    ap.add_argument("--ppe", nargs="+", default=[None], choices=["sparse_cg", "ell_pcg"],
+    ap.add_argument("--ppe", nargs="+", default=[None], choices=["sparse_cg", "ell_pcg", "mg_pcg"],
                     help="isph PPE solver types to run, each case with each in turn (default: the config's)")
     ap.add_argument("--min-time", type=float, default=10.0, help="seconds of timed steps per case")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",

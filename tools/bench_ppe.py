@@ -12,12 +12,15 @@ the previous solution, as the solver starts from the last pressure).
   through the project's SparseCGSolver wrapper (it asks Eigen for tol / 2 and checks |b - A x| / |b|);
 - ell:    fill an EllPCG row by row, then its Jacobi-PCG; once with the ELL width set to the largest
           neighbour count, once with the width of the default neighbour-list capacity (the width
-          costs memory traffic: rows are strided by it).
+          costs memory traffic: rows are strided by it);
+- mg:     the same ELL fill into an MGPCG (width = the largest neighbour count), each row given the
+          cell of edge 2.4 dx of its particle (the neighbour grid's), then the multigrid-PCG; its solve
+          time includes the set-up of the hierarchy (Galerkin products), also given apart.
 
 Both stop at the same relative residual 1e-8, f64, CPU. Times are the best of --repeat runs after a
 warm-up (JIT compilation excluded). Prints Markdown tables naming the machine and its load average.
 
-    python tools/bench_ppe.py [--repeat 3] [--threads N] [--sizes 5k,20k,80k,3d20k]
+    python tools/bench_ppe.py [--repeat 3] [--threads N] [--sizes 5k,20k,80k,3d20k,...]
 """
 
 import argparse
@@ -44,6 +47,13 @@ CASES = {
     "20k": (141, 142),
     "80k": (283, 283),
     "3d20k": (27, 27, 27),
+    # the step benchmark's hydrostatic sizes (S, M, L of tools/bench.py), for the multigrid's growth
+    "10k": (100, 100),
+    "50k": (224, 224),
+    "200k": (447, 447),
+    "3d10k": (22, 22, 22),
+    "3d50k": (37, 37, 37),
+    "3d200k": (58, 58, 58),
 }
 
 
@@ -161,7 +171,9 @@ def bench_case(name, shape, repeat):
     import taichi as ti
 
     from taichi_sph.linalg.ell_pcg import EllPCG
+    from taichi_sph.linalg.mg_pcg import MGPCG
     from taichi_sph.linalg.sparse_cg import SparseCGSolver
+    from taichi_sph.sph import kernels
 
     prob = make_problem(shape)
     n = prob.n
@@ -169,6 +181,13 @@ def bench_case(name, shape, repeat):
     sparse = SparseCGSolver(n, n * (prob.max_nb + 1), ti.f64, TOLERANCE, 10000)
     ells = {"ell": EllPCG(n, prob.max_nb, TOLERANCE, 10000),
             "ell_wide": EllPCG(n, WIDE[dim], TOLERANCE, 10000)}
+    # the multigrid's level-1 cells: the neighbour grid's, edge = the kernel support 2.4 dx
+    xp = prob.x.to_numpy()
+    cc = np.floor((xp - xp.min(axis=0) + 1e-9) / (kernels.SUPPORT_FACTOR * 0.01)).astype(np.int64)
+    ncell = tuple(int(v) for v in cc.max(axis=0) + 1)
+    mg = MGPCG(n, prob.max_nb, TOLERANCE, 10000, cells=ncell)
+    mg.load_cells(np.ravel_multi_index(cc.T, ncell))
+    ells["mg"] = mg
 
     def run_sparse(x0):
         t0 = time.perf_counter()
@@ -189,7 +208,7 @@ def bench_case(name, shape, repeat):
         it, res, ok = ell.solve(n)
         t2 = time.perf_counter()
         return {"fill": t1 - t0, "solve": t2 - t1, "iterations": it, "residual": res, "ok": ok,
-                "x": ell.x.to_numpy()}
+                "x": ell.x.to_numpy(), "setup": getattr(ell, "last_setup_seconds", 0.0)}
 
     paths = {"sparse": run_sparse, **{k: (lambda x0, e=e: run_ell(e, x0)) for k, e in ells.items()}}
 
@@ -203,6 +222,7 @@ def bench_case(name, shape, repeat):
             best = dict(rs[-1])
             best["fill"] = min(r["fill"] for r in rs)
             best["solve"] = min(r["solve"] for r in rs)
+            best["setup"] = min(r.get("setup", 0.0) for r in rs)
             out[k] = best
         xs = out["sparse"].pop("x")
         out["solution_difference"] = max(float(np.linalg.norm(xs - out[k].pop("x")) / np.linalg.norm(xs))
@@ -250,6 +270,22 @@ def markdown(results, info) -> str:
                 f"| {e['fill']:.4f} | {e['solve']:.4f} | {te:.4f} | {ts / te:.2f} | {tw:.4f} | {ts / tw:.2f} "
                 f"| {s['residual']:.1e} / {e['residual']:.1e} | {c['solution_difference']:.1e} |"
             )
+    lines += [
+        "",
+        "Multigrid-PCG (mg) against Jacobi-PCG (ell), the same ELL matrix and fill; mg solve includes the "
+        "set-up of its hierarchy (given apart):",
+        "",
+        "| case | scenario | rows | iterations ell / mg | ell solve | mg set-up | mg solve | ell / mg (solve) "
+        "| residual ell / mg |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    for r in results:
+        for scenario in ("cold", "warm"):
+            e, m = r[scenario]["ell"], r[scenario]["mg"]
+            lines.append(f"| {r['dim']}D {r['case']} | {scenario} | {r['rows']} "
+                         f"| {e['iterations']} / {m['iterations']} "
+                         f"| {e['solve']:.4f} | {m['setup']:.4f} | {m['solve']:.4f} | {e['solve'] / m['solve']:.2f} "
+                         f"| {e['residual']:.1e} / {m['residual']:.1e} |")
     return "\n".join(lines)
 
 
@@ -272,7 +308,7 @@ def main(argv=None) -> int:
         print(f"done {name}: {results[-1]['rows']} rows", file=sys.stderr, flush=True)
     print(markdown(results, info))
     bad = [f"{r['case']} {c}" for r in results for c in ("cold", "warm")
-           if not all(r[c][k]["ok"] for k in ("sparse", "ell", "ell_wide"))]
+           if not all(r[c][k]["ok"] for k in ("sparse", "ell", "ell_wide", "mg"))]
     if bad:
         print(f"not converged: {', '.join(bad)}", file=sys.stderr)
         return 1

@@ -28,6 +28,7 @@ from .. import guard
 from ..backend import is_f64
 from ..errors import InstabilityError
 from ..linalg.ell_pcg import EllOverflowError, EllPCG
+from ..linalg.mg_pcg import MGPCG
 from ..linalg.sparse_cg import SparseCGSolver
 from ..scene import WALL, WATER
 from ..sph import kernels, operators
@@ -186,11 +187,16 @@ class ISPHSolver(SolverCommon):
             self.nsurf_tab = ti.field(float, len(eps_tab))
             self.nsurf_tab.from_numpy((self.n_surf * n_tab / n_tab[-1]).astype(self.np_fp))
         fp = ti.f64 if is_f64() else ti.f32
-        # PPE solver (ti.static switch in the assembly): ELL matrix + Jacobi-PCG, or the sparse builder
+        # PPE solver (ti.static switch in the assembly): ELL matrix + Jacobi-PCG or multigrid-PCG (its
+        # levels the neighbour grid's cells), or the sparse builder
         self.ppe_ell = sw.ppe_ell
         if self.ppe_ell:
-            self.ppe = EllPCG(max(self.n_water, 1), ppe_width(cfg), cfg.isph.ppe.tolerance,
-                              cfg.isph.ppe.max_iterations, dtype=ppe_precision(cfg.isph.ppe, fp))
+            ppe_args = (max(self.n_water, 1), ppe_width(cfg), cfg.isph.ppe.tolerance, cfg.isph.ppe.max_iterations)
+            if cfg.isph.ppe.type == "mg_pcg":
+                self.ppe = MGPCG(*ppe_args, dtype=ppe_precision(cfg.isph.ppe, fp), cells=self.grid.ncell,
+                                 periodic=[p > 0.0 for p in self.grid.period], source=(self.grid.cell, self.row))
+            else:
+                self.ppe = EllPCG(*ppe_args, dtype=ppe_precision(cfg.isph.ppe, fp))
             # the right-hand side and the solution live in the solver's fields (no host copies)
             self.b = self.ppe.b
             self.psol = self.ppe.x

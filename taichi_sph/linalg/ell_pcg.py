@@ -319,6 +319,19 @@ class EllPCG:
         self.overflow[None] = 0
         return out
 
+    # ------------------------------------------------------------------ preconditioner hooks
+    def _prepare(self) -> None:
+        """Once per solve, after the matrix is filled: set up the preconditioner (Jacobi: nothing here,
+        the inverse diagonal is taken in `_k_residual`)."""
+
+    def _restart(self):
+        """r = b - A x, z = M^-1 r, next direction p = z; returns (|b|^2, |r|^2)."""
+        return self._k_residual()
+
+    def _iterate(self) -> float:
+        """One PCG iteration; returns the recurrence |r|^2, or -1 on breakdown."""
+        return self._k_iterate()
+
     # ------------------------------------------------------------------ host API
     def check_overflow(self) -> None:
         """Raise EllOverflowError if a row was filled past `max_nb` since the last check."""
@@ -339,7 +352,8 @@ class EllPCG:
             self.n[None] = int(n)
         if zero_mean:
             self._k_remove_mean(self.b)
-        bb, rr = (float(v) for v in self._k_residual())
+        self._prepare()
+        bb, rr = (float(v) for v in self._restart())
         if not bb > 0.0:
             if math.isfinite(bb):
                 self._k_zero_x()
@@ -350,11 +364,11 @@ class EllPCG:
         restarts = 0
         while math.isfinite(rr) and rr > threshold and iterations < self.max_iterations:
             while iterations < self.max_iterations:
-                rr_rec = self._k_iterate()
+                rr_rec = self._iterate()
                 iterations += 1
                 if not rr_rec >= 0.0 or rr_rec <= threshold:  # breakdown, non-finite or converged
                     break
-            bb, rr = (float(v) for v in self._k_residual())
+            bb, rr = (float(v) for v in self._restart())
             if rr <= threshold or restarts == MAX_RESTARTS:
                 break
             restarts += 1

@@ -103,6 +103,8 @@ class NeighbourGrid:
         self.nbr = ti.field(ti.i32, (self.capacity, self.max_neighbours))
         self._cell = ti.field(ti.i32, self.capacity)  # cell of particle i, original order
         self._cell_sorted = ti.field(ti.i32, self.capacity)  # cell of position k, sorted order
+        #: cell of the particle at (sorted) index k after `sort()`, `num_cells` outside the box or inactive
+        self.cell = self._cell_sorted
         self._left = ti.field(ti.i8, self.capacity)  # 1 if deactivated by the last sort()
         self._count = ti.field(ti.i32, self.num_cells + 1)
         self._cursor = ti.field(ti.i32, self.num_cells + 1)
