@@ -45,6 +45,23 @@ def test_every_case_has_runs_of_three_resolutions_or_is_pending():
     assert not any(c.pending for c in validate.CASES.values())
 
 
+def test_a_case_run_again_replaces_only_its_own_results(tmp_path):
+    """Running some cases keeps the others' rows from the JSON beside the report (with the setting and
+    machine an older file kept once, at its top); the report's total time is the sum of the cases'."""
+    old = {"setting": "small", "machine": "m1", "seconds": 99.0, "cases": {
+        "terzaghi": {"rows": [{"process_seconds": 10.0, "twin process s": 5.0}], "variants": {}},
+        "hydrostatic": {"rows": [{"process_seconds": 7.0}], "variants": {}}}}
+    path = tmp_path / "validation.json"
+    path.write_text(validate.json.dumps(old))
+    kept = validate.load_results(path)
+    assert kept["terzaghi"]["setting"] == "small" and kept["hydrostatic"]["machine"] == "m1"
+    new = {"terzaghi": {"rows": [], "variants": {}, "setting": "full", "machine": "m2", "seconds": 60.0}}
+    merged = validate.merge_results(kept, new)
+    assert list(merged) == ["hydrostatic", "terzaghi"]  # registry order
+    assert merged["terzaghi"]["setting"] == "full" and merged["hydrostatic"]["setting"] == "small"
+    assert sum(validate.case_seconds(r) for r in merged.values()) == 67.0
+
+
 def test_darcy_column_converges(tmp_path):
     """The two coarsest Darcy columns of the small setting through the suite's own runner. Measured:
     error 0.28 % at dx 2 cm and 0.095 % at 1 cm (order 1.6). Bounds: 0.6 % and 0.2 % (twice the measured,

@@ -420,16 +420,18 @@ def _dupuit(setting):
 
 
 @case("granular_collapse", "Dry granular column collapse, aluminium rods (2D, wcsph_biot)",
-      "true-2D experiments with aluminium rods (phi 19.8 deg; Bui et al. 2008): (d - d0) / d0 = 3.25 a^0.96 and "
-      "h0 / h = 1.42 a^(2/3) for 0.65 <= a <= 1.5 (Nguyen et al. 2015)",
+      "true-2D experiments with aluminium rods (phi 19.8 deg; Bui et al. 2008): (d - d0) / d0 = 3.25 "
+      "a^0.96 for 0.65 <= a <= 1.5 and 3.80 a^0.73 above, h0 / h = 1.42 a^(2/3) for a >= 0.65 (Nguyen et al. "
+      "2015)",
       "final run-out within 15 % (error: |d / d_exp - 1|), final height within 10 %", 0.15,
       secondary={"height error": 0.10})
 def _granular_collapse(setting):
-    # configs/granular_collapse.yaml, a = 1.0 (default) and 1.4 (variant tall), column width d0 = 0.1 m;
-    # the deposit at 1 s (at rest from ~0.7 s), read by taichi_sph.wcsph.collapse.final_deposit
+    # configs/granular_collapse.yaml, a = 1.0 (default), 1.4 (variant tall) and 2.0 (variant a2, on the
+    # run-out fit for a > 1.5), column width d0 = 0.1 m; the deposit at 1 s (at rest from ~0.7 s), read by
+    # taichi_sph.wcsph.collapse.final_deposit
     dxs = (0.02, 0.01, 0.005) if setting == "small" else (0.01, 0.005, 0.0025)
     runs = []
-    for variant, args in (("a 1.0", []), ("a 1.4", ["--variant", "tall"])):
+    for variant, args in (("a 1.0", []), ("a 1.4", ["--variant", "tall"]), ("a 2.0", ["--variant", "a2"])):
         runs += [Run(variant, dx, "configs/granular_collapse.yaml", [f"dx={dx:.6g}"], args) for dx in dxs]
 
     def evaluate(path, run):
@@ -596,22 +598,47 @@ DIAGNOSES = {
 }
 
 
-def write_report(results: dict, setting: str, elapsed: float, machine: str, path_md: Path, img_dir: Path):
+def case_seconds(res: dict) -> float:
+    """Wall seconds a case took: as recorded, else the sum of its runs' process times (twins included)."""
+    if "seconds" in res:
+        return float(res["seconds"])
+    rows = res.get("rows", [])
+    return float(sum(r.get("process_seconds", 0.0) + r.get("twin process s", 0.0) for r in rows))
+
+
+def merge_results(old: dict, new: dict) -> dict:
+    """The cases of `old` (a report's JSON "cases") with those of `new` replacing them, in registry order;
+    cases no longer registered are dropped."""
+    merged = {**old, **new}
+    return {name: merged[name] for name in CASES if name in merged}
+
+
+def write_report(results: dict, path_md: Path, img_dir: Path):
+    """docs/validation.md from the cases' results, each with the setting, machine and seconds of its run."""
+    settings = {}
+    for name, res in results.items():
+        if "pending" not in res:
+            settings.setdefault(res.get("setting", "small"), []).append(name)
+    machines = sorted({res["machine"] for res in results.values() if res.get("machine")})
+    total = sum(case_seconds(res) for res in results.values())
+    produced = "; ".join(f"`--{st}`: {', '.join(names)}" for st, names in settings.items())
     lines = ["# Validation", "",
-             (f"Produced by `python tools/validate.py --{setting}` ({setting} setting) on {machine}; "
-             f"{elapsed / 60:.1f} min in all. Each row is one run through the command line; the wall time is "
+             (f"Produced by `python tools/validate.py` ({produced}) on {' / '.join(machines)}; "
+             f"{total / 60:.1f} min in all (the sum of the cases' times; a case run again replaces its "
+             "rows, the others stay). Each row is one run through the command line; the wall time is "
              "that of the time steps (compilation and start-up excluded), the process time includes them. "
              "The observed order is log(e1/e2)/log(dx1/dx2) between consecutive resolutions and the "
              "least-squares slope over all of them. Targets are those of the specification (section 7) at "
              "the finest resolution the full setting runs; the small setting runs coarser and shorter."),
              "", ("Exit codes of a run that stops (docs in `taichi_sph/errors.py`): 3 bounds, 4 non-finite, "
              "5 solver, 6 domain."), ""]
-    lines += ["## Summary", "", "| case | variant | finest dx | error at finest | target | order (fit) | verdict |",
-              "|---|---|---|---|---|---|---|"]
+    lines += ["## Summary", "",
+              "| case | setting | variant | finest dx | error at finest | target | order (fit) | verdict |",
+              "|---|---|---|---|---|---|---|---|"]
     for name, res in results.items():
         c = CASES[name]
         if c.pending:
-            lines.append(f"| {name} | - | - | - | {c.target} | - | pending: {c.pending} |")
+            lines.append(f"| {name} | - | - | - | - | {c.target} | - | pending: {c.pending} |")
             continue
         for v, s in res["variants"].items():
             finest = min(r["dx"] for r in res["rows"] if r["variant"] == v)
@@ -624,11 +651,15 @@ def write_report(results: dict, setting: str, elapsed: float, machine: str, path
             if np.isfinite(order) and order <= 0:
                 verdict += "; order not positive"
             tv = f"{c.target_value:g}" if c.target_value is not None else "-"
-            lines.append(f"| {name} | {v} | {finest:.4g} | {_fmt(e)} | {tv} | {_fmt(order, '.2f')} | {verdict} |")
+            st = res.get("setting", "small")
+            lines.append(f"| {name} | {st} | {v} | {finest:.4g} | {_fmt(e)} | {tv} | {_fmt(order, '.2f')} | "
+                         f"{verdict} |")
     lines.append("")
     for name, res in results.items():
         c = CASES[name]
         lines += [f"## {c.title}", "", f"Reference: {c.reference}. Target: {c.target}.", ""]
+        if not c.pending:
+            lines += [f"Setting: {res.get('setting', 'small')}; {case_seconds(res) / 60:.1f} min.", ""]
         if c.pending:
             lines += [f"Pending: {c.pending}.", ""]
             continue
@@ -692,12 +723,12 @@ def main(argv=None) -> int:
     setting = args.setting or "small"
     if args.report_only:
         out_md = Path(args.out)
-        data = json.loads(out_md.with_suffix(".json").read_text())
-        results = data["cases"]
+        results = load_results(out_md.with_suffix(".json"))
+        (out_md.parent / "img").mkdir(parents=True, exist_ok=True)
         for name, res in results.items():
             if "rows" in res:
                 res["image"] = plot_case(CASES[name], res, out_md.parent / "img")
-        write_report(results, data["setting"], data["seconds"], data["machine"], out_md, out_md.parent / "img")
+        write_report(results, out_md, out_md.parent / "img")
         return 0
     if args.list:
         for c in CASES.values():
@@ -712,6 +743,7 @@ def main(argv=None) -> int:
     img_dir = out_md.parent / "img"
     img_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
+    machine = machine_text()
     results = {}
     with tempfile.TemporaryDirectory(prefix="validate-") as tmp:
         for name in names:
@@ -720,18 +752,32 @@ def main(argv=None) -> int:
                 results[name] = {"pending": c.pending}
                 continue
             print(f"{name}:", flush=True)
+            tc = time.perf_counter()
             res = run_case(c, setting, Path(tmp), args.timeout, lambda s: print(s, flush=True))
+            res.update(setting=setting, machine=machine, seconds=time.perf_counter() - tc)
             res["image"] = plot_case(c, res, img_dir)
             results[name] = res
     elapsed = time.perf_counter() - t0
-    machine = machine_text()
-    write_report(results, setting, elapsed, machine, out_md, img_dir)
-    out_md.with_suffix(".json").write_text(json.dumps({"setting": setting, "machine": machine,
-                                                       "seconds": elapsed, "cases": results}, indent=1,
-                                                      default=float))
+    # the cases not run this time keep their results from the JSON beside the report
+    results = merge_results(load_results(out_md.with_suffix(".json")), results)
+    write_report(results, out_md, img_dir)
+    out_md.with_suffix(".json").write_text(json.dumps({"cases": results}, indent=1, default=float))
     print(f"wrote {out_md} ({elapsed / 60:.1f} min)")
     return 0
 
+
+def load_results(path: Path) -> dict:
+    """The cases of a report's JSON, each with its setting and machine (older files kept them once, at the
+    top); {} when there is no file."""
+    if not path.exists():
+        return {}
+    data = json.loads(path.read_text())
+    results = data["cases"]
+    for res in results.values():
+        if "pending" not in res:
+            res.setdefault("setting", data.get("setting", "small"))
+            res.setdefault("machine", data.get("machine", ""))
+    return results
 
 if __name__ == "__main__":
     sys.exit(main())
