@@ -1,7 +1,7 @@
 """Dry granular column collapse against the true-2D experiments with aluminium rods (mode wcsph_biot):
 configs/granular_collapse.yaml, Mohr-Coulomb phi = 19.8 deg (the rods of Bui et al. 2008), compared with
 the power-law fits of Nguyen et al. (2015) to their final deposits, tests/data/nguyen_2015_true2d_collapse.csv.
-The validation suite (tools/validate.py, case granular_collapse) runs a = 1.0 and 1.4 at three
+The validation suite (tools/validate.py, case granular_collapse) runs a = 1.0, 1.4 and 2.0 at three
 resolutions; this is its small case."""
 
 from pathlib import Path
