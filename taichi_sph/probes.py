@@ -287,7 +287,8 @@ class ProbeRecorder:
     def due(self, t: float) -> list[int]:
         return self.set.due(t)
 
-    def record(self, t: float, arrays: Mapping[str, np.ndarray], which: Sequence[int]) -> None:
+    def record(self, t: float, arrays: Mapping[str, np.ndarray], which: Sequence[int]) -> dict:
+        """Sample the probes `which` at t, buffer and write the samples; returns {name: value}."""
         values = self.set.sample(t, arrays, which)
         row = {}
         for name, val in values.items():
@@ -300,6 +301,7 @@ class ProbeRecorder:
                 for a, v in zip("xyz", arr):
                     row[f"{name}_{a}"] = float(v)
         self.csv.append(t, row)
+        return values
 
     def flush(self) -> None:
         for k, probe in enumerate(self.set.probes):

@@ -24,7 +24,8 @@ from .solvers import make_solver
 log = logging.getLogger("taichi_sph")
 
 DIAG_COLUMNS = ("time", "dt", "kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
-                "wall_seconds", "dt_limit", "free_surface", "collisions", "isolated", "drag_sum", "drag_max")
+                "wall_seconds", "dt_limit", "free_surface", "collisions", "isolated", "closed_bodies", "drag_sum",
+                "drag_max")
 #: columns the driver fills itself; the others come from the solver's step() (the ones its
 #: `diagnostic_names` lists, contract.Solver)
 DRIVER_COLUMNS = ("time", "dt", "wall_seconds", "dt_limit")
@@ -160,6 +161,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             fields0 = _with_flag(solver.fields_by_id())
             guard.start(fields0)
             extras.after_step(0.0, lambda: fields0)
+            _observe(solver, 0.0, extras.readings)
             extras.after_frame(writer.write_frame(0.0, fields0), 0.0, fields0)
             volume0 = first["water_volume"]
             next_out = every
@@ -195,6 +197,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                 column.append(driver[key] if key in driver else last[key])
             guard.after_step(solver.step_count, t, last, lambda: _fastest_particle(solver))
             fields = extras.after_step(t, lambda: _with_flag(solver.fields_by_id()))
+            _observe(solver, t, extras.readings)
             frame_due = t >= next_out - 1e-9 * every
             if frame_due or guard.due(solver.step_count):
                 fields = fields if fields is not None else _with_flag(solver.fields_by_id())
@@ -309,6 +312,13 @@ def _fastest_particle(solver) -> int:
     return int(np.nanargmax(np.where(np.isfinite(speed), speed, np.inf)))
 
 
+def _observe(solver, t: float, readings: dict) -> None:
+    """Hand the probes' readings at t to a solver that acts on them (a river inflow held at a level)."""
+    observe = getattr(solver, "observe_probes", None)
+    if readings and observe is not None:
+        observe(t, readings)
+
+
 def probe_arrays(fields: dict, kind: np.ndarray, mass: float, rho_w: float) -> dict:
     """Host arrays for `probes`: frame fields (by id) plus kind and the bulk volume m / (eps rho_w)."""
     arrays = dict(fields, kind=kind)
@@ -326,6 +336,7 @@ class RunExtras:
     sidecar of the frames written. None of them can stop the simulation: failures are logged."""
 
     def __init__(self, cfg, writer, out_path, kind, mass: float, rho_w: float, keep_csv_rows: int | None = None):
+        self.readings: dict = {}  # the probes' readings of the last step (after_step)
         from .io.hdf5 import unit_for
         from .io.probe_csv import probe_csv_path
 
@@ -366,14 +377,16 @@ class RunExtras:
             self.recorder.set._next = [float(v) for v in saved["probe_next"]]
 
     def after_step(self, t: float, fetch):
-        """Sample the probes due at t; returns the fetched fields (None when nothing was due)."""
+        """Sample the probes due at t; returns the fetched fields (None when nothing was due). The
+        readings taken are left in `readings` ({probe name: value}, empty when none was due)."""
+        self.readings = {}
         if self.recorder is None:
             return None
         due = self.recorder.due(t)
         if not due:
             return None
         fields = fetch()
-        self.recorder.record(t, probe_arrays(fields, self.kind, self.mass, self.rho_w), due)
+        self.readings = self.recorder.record(t, probe_arrays(fields, self.kind, self.mass, self.rho_w), due)
         return fields
 
     def after_frame(self, index: int, t: float, fields: dict) -> None:

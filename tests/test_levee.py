@@ -110,6 +110,77 @@ def test_inflow_raises_the_level(run_cli, tmp_path):
     assert abs(level - 0.115) < 0.01, level
 
 
+LEVEL_YAML = """\
+mode: wcsph_biot
+dim: 2
+dx: 0.02
+end_time: 2.0
+dt: auto
+output: {path: out/level.h5, every: 0.5}
+tank: {size: [0.8, 0.4], boundary: slip}
+water:
+  - {min: [0.0, 0.0], max: [0.8, 0.1]}
+inflow:
+  - {min: [0.0, 0.16], max: [0.16, 0.36], rate: 0.02, level: [[0.0, 0.12]], level_probe: river,
+     level_smoothing: 0.5}
+probes:
+  - {name: river, type: water_level, point: [0.4, 0.0], every: 0.01}
+  - {name: vol, type: water_volume, box: {min: [0.0, 0.0], max: [0.8, 0.155]}, every: 0.01}
+"""
+
+
+def test_inflow_holds_a_level(run_cli, tmp_path):
+    """A river 0.8 m wide, 0.1 m deep, held at 0.12 m by a source of 8 x 10 particles (0.032 m^2, enough
+    to raise it by 0.04 m) that releases 0.02 m^2/s while the mid-river level probe, averaged over 0.5 s
+    (about a third of the river's seiche period), reads below the target. The river's mean level is its
+    water (all active water particles, the falling ones included) over its width. It must reach the target
+    and stop there: at the end at least the target less one row (8 dx^2 / 0.8 m = 4 mm) and at most two
+    rows above it (measured: one row above, 0.124 m; the lag of the stream's fall, 0.22 s, and of the
+    0.5 s window would allow rate (0.22 + 0.25) s / W = 12 mm); over 1.5-2 s the water under the source
+    box stays within the same band; the source must not empty (released 0.0192 of 0.032 m^2). The
+    probe's own samples (the run file's level history) swing +-0.02 m with the impact's waves."""
+    cfg = tmp_path / "level.yaml"
+    cfg.write_text(LEVEL_YAML)
+    out = tmp_path / "level.h5"
+    r = run_cli("--config", cfg, "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    with RunFile(out) as rf:
+        t, vol = rf.probes()["vol"]
+        t_lv, lv = rf.probes()["river"]
+        f = rf.frame(rf.n_frames - 1)
+        released = int((((rf.kind == WATER) & f["active"]).sum() - 40 * 5)) * 0.02**2
+    assert len(t_lv) == len(t) and np.all(np.isfinite(lv))  # the level history is in the run file
+    row = 8 * 0.02**2 / 0.8
+    final = (0.08 + released) / 0.8
+    assert 0.12 - row <= final <= 0.12 + 2 * row + 1e-9, final
+    late = vol[t >= 1.5] / 0.8
+    assert late.min() > 0.12 - row and late.max() < 0.12 + 2 * row, (late.min(), late.max())
+    assert released < 0.032 - 1e-9  # the gate closed before the source emptied
+
+
+def test_inflow_level_state_round_trip():
+    """The controlled source's rows, volume and gate go into a checkpoint and come back unchanged, and
+    the target level is linear between its points and held after the last. (With level_smoothing 0
+    the window holds the last reading only.)"""
+    from types import SimpleNamespace
+
+    from taichi_sph.wcsph.inflow import Inflow
+
+    src = SimpleNamespace(rate=0.01, start=0.0, level=[[0.0, 0.1], [1.0, 0.2]], level_probe="river",
+                          level_smoothing=0.0)
+    rows = [np.arange(5) + 5 * k for k in range(4)]
+    inflow = Inflow(SimpleNamespace(dx=0.01, dim=2, inflow=[src]), [rows])
+    assert abs(inflow.target(0, 0.5) - 0.15) < 1e-12 and inflow.target(0, 3.0) == 0.2
+    inflow.observe(0.0, {"river": 0.05})  # below the target: open
+    assert len(inflow.release(0.0, 0.05)) == 5  # 0.01 m^2/s x 0.05 s = one row of 5 x 1e-4 m^2
+    inflow.observe(0.05, {"river": 0.3})  # above: closed, nothing more
+    assert len(inflow.release(0.05, 0.5)) == 0
+    again = Inflow(SimpleNamespace(dx=0.01, dim=2, inflow=[src]), [rows])
+    again.state = inflow.state
+    assert again.done == inflow.done and again.volume == inflow.volume and again.gate == inflow.gate
+    assert again.recent == inflow.recent and len(again.recent[0]) == 1
+
+
 def test_rigid_levee_seepage_dupuit(run_cli, tmp_path):
     """configs/levee_seepage.yaml to 2 s (the water in the levee starts on its steady free surface): the
     discharge into the downstream basin (the slope of its water volume over 0.3-2 s) against Dupuit's

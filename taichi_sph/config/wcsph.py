@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, ClassVar, Literal, Optional
 
 from pydantic import Field, model_validator
 
@@ -215,10 +215,38 @@ class InflowSource(Box):
     released row by row, lowest first, at a prescribed volume rate; they start at rest and fall into the
     river, whose level rises by rate / river width (docs/biot.md)."""
 
-    #: volume of water released per second (m^2/s per metre of levee in 2D, m^3/s in 3D)
+    #: volume of water released per second (m^2/s per metre of levee in 2D, m^3/s in 3D); with `level`,
+    #: the rate while the river is below its target level
     rate: PosFloat
     #: time the release starts (s)
     start: NonNegFloat = 0.0
+    #: target river level history [[t, z], ...] (s, m; times increasing, linear between, held after the
+    #: last): the source releases at `rate` while the river, read by the probe `level_probe`, is below
+    #: the target, and holds while it is at or above it (a river held at a level, or rising at a rate)
+    level: Optional[list[list[float]]] = None
+    #: name of a `water_level` probe (in `probes`) that reads the river level for `level`; its `every`
+    #: is the control interval, and its samples are the run's level-time history
+    level_probe: Optional[str] = None
+    #: the gate compares the mean of the probe's readings over this many seconds (a stilling well: the
+    #: waves that the falling stream raises swing a single reading); 0 = the last reading
+    level_smoothing: NonNegFloat = 0.0
+
+    @model_validator(mode="after")
+    def _level_pair(self):
+        """`level` and `level_probe` come together; the target's times increase."""
+        if (self.level is None) != (self.level_probe is None):
+            have, need = ("level", "level_probe") if self.level is not None else ("level_probe", "level")
+            fail(need, f"required with `{have}` (a target level history and the probe that reads it)")
+        if self.level is not None:
+            if not self.level:
+                fail("level", "needs at least one [t, z] point")
+            for k, point in enumerate(self.level):
+                if len(point) != 2 or point[0] < 0:
+                    fail(f"level[{k}]", f"needs [t, z] with t >= 0 (got {point})")
+            times = [t for t, _ in self.level]
+            if any(b <= a for a, b in zip(times, times[1:])):
+                fail("level", f"times must increase (got {times})")
+        return self
 
 
 class WCSPH(Strict):
@@ -281,3 +309,8 @@ def check_soil_blocks(cfg) -> None:
         if cfg.mode != "wcsph_biot":
             fail(f"inflow[{k}]", f"an inflow needs mode wcsph_biot (mode is {cfg.mode})")
         check_box(src, cfg.dim, cfg.tank.size, f"inflow[{k}]")
+        if src.level_probe is not None:
+            probe = next((p for p in cfg.probes if p.name == src.level_probe), None)
+            if probe is None or probe.type != "water_level":
+                fail(f"inflow[{k}].level_probe",
+                     f"names no water_level probe in `probes` ({src.level_probe!r})")

@@ -72,6 +72,7 @@ UNITS: dict[str, str] = {
     "id": "1",
     "free_surface": "1",
     "isolated": "1",
+    "closed_bodies": "1",
     "stress": "Pa",
     "effective_stress": "Pa",
     "deviatoric_stress": "Pa",

@@ -195,6 +195,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.inflow = None  # river inflow: reserve water released row by row (inflow.py)
         if scene.inflow_rows:
             self.inflow = Inflow(cfg, scene.inflow_rows)
+            if self.inflow.controlled:  # a river held at a level: its gates and volumes go into checkpoints
+                self.state_scalars = (*type(self).state_scalars, "inflow_state")
             active = np.ones(n, np.int32)
             active[self.inflow.reserve_ids()] = 0
             self.active.from_numpy(active)
@@ -739,6 +741,20 @@ class WCSPHSolver(SoilStep, SolverCommon):
                     "wall_origin")
     state_scalars = ("step_count", "time", "removed_total", "dt_prev", "r_list", "hmax", "rebuilds", "red",
                      "red_s")
+
+    @property
+    def inflow_state(self) -> np.ndarray:
+        """Rows and volume released and gate of each river inflow (inflow.py), for checkpoints."""
+        return self.inflow.state
+
+    @inflow_state.setter
+    def inflow_state(self, value) -> None:
+        self.inflow.state = value
+
+    def observe_probes(self, t: float, readings: dict) -> None:
+        """The probes' readings at t: a river inflow held at a level opens or closes (inflow.py)."""
+        if self.inflow is not None:
+            self.inflow.observe(t, readings)
 
     def state(self) -> dict:
         """Full state for a checkpoint, {name: numpy array or scalar} (sph/state.py)."""
