@@ -118,3 +118,16 @@ def test_taylor_green_decay_coarse(tmp_path):
     assert row["status"] == "completed", row
     row.update(evaluate(tmp_path / row.pop("out").split("/")[-1], run))
     assert row["error"] < 0.065 and row["velocity L2 at end"] < 0.10, row
+
+
+def test_report_names_the_setting_of_each_case():
+    """A report merged from runs of different settings says which case ran in which, and its time is the sum
+    of the cases' times (the recorded one, else the runs' process times)."""
+    rows = [{"process_seconds": 30.0}, {"process_seconds": 60.0, "twin process s": 30.0}]
+    results = {"hydrostatic": {"rows": rows, "setting": "small", "machine": "m"},
+               "permeameter": {"rows": rows, "setting": "full", "machine": "m", "seconds": 600.0},
+               "dupuit": {"pending": "why"}}
+    text = validate.provenance(results)
+    assert "the full setting (`--full`) for permeameter" in text
+    assert "the small setting (`--small`) for hydrostatic" in text
+    assert "12.0 min of runs" in text
