@@ -40,7 +40,7 @@ def test_every_case_has_runs_of_three_resolutions_or_is_pending():
         for v in {r.variant for r in runs}:
             assert len({r.dx for r in runs if r.variant == v}) >= 3, (c.name, v)
     names = set(validate.CASES)
-    assert {"hydrostatic", "dambreak", "darcy_column", "freefall"} <= names
+    assert {"hydrostatic", "dambreak", "darcy_column", "permeameter", "freefall"} <= names
     assert {"terzaghi", "dupuit", "critical_gradient", "taylor_green", "channel_startup", "granular_collapse"} <= names
     assert not any(c.pending for c in validate.CASES.values())
 

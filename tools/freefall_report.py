@@ -9,7 +9,10 @@ about eps0); the water volume measure (sum of m eps / <rho>, docs/output.md) aga
 arrival, its lowest and highest value over the run and its mean over the last 0.25 s (the last
 sample alone scatters with the sloshing pool); the water still inside the layer at the end; the
 bottom pressure at the end against hydrostatic, and the pool's vertical pressure gradient against
-rho_w g; the wall time of the run.
+rho_w g; the largest particle speed over the run (|vD| of /diagnostics/max_speed) and the time it
+occurred; whether the run reached its end time (a run the guard stopped keeps its frames: the time it
+stopped); the particle shifting and near-contact collision options (isph.shifting,
+isph.collision_distance; "off" when 0) and the advection (isph.advection); the wall time of the run.
 
 Bottom pressure: the mean pressure of the bottom row of water particles (centres within half a
 spacing of the lowest) against the mean of rho_w g (s - z), with the pool's surface s taken as the
@@ -75,26 +78,43 @@ def analyse(path):
             "drift_end": float(vol[settled].mean()),
             "in_layer_end": float(frac[-1]),
             "bottom_pressure_Pa": p_bottom, "hydrostatic_Pa": p_hydro, "pool_gradient": slope,
+            "max_speed": float(d["max_speed"].max()), "t_max_speed": float(t[np.argmax(d["max_speed"])]),
+            "end_s": float(t[-1]), "finished": bool(t[-1] >= float(cfg["end_time"]) - 0.5 * float(cfg["dt"])),
+            "options": options(cfg.get("isph") or {}),
             "wall_s": float(np.sum(d["wall_seconds"])) if "wall_seconds" in d else None,
         }
+
+
+def options(isph):
+    """Shifting / collisions / advection of a run, with the schema's defaults (config/isph.py)."""
+    shift = float(isph.get("shifting", 2.0))
+    coll = float(isph.get("collision_distance", 0.8))
+    on = lambda v: "off" if v == 0 else f"{v:g}"
+    return f"{on(shift)} / {on(coll)} / {isph.get('advection', 'pore')}"
 
 
 def row(r):
     fmt = lambda v, f: "-" if v is None else format(v, f)
     seed = FREEFALL_ARRIVAL.get(round(float(r["eps0"]), 2))
+    if not r["finished"]:  # the end state of a stopped run is its blow-up: no end numbers
+        r = {**r, "drift_end": None, "in_layer_end": None, "hydrostatic_Pa": None, "pool_gradient": None}
     pressure = "-" if r["hydrostatic_Pa"] is None else (
         f"{r['bottom_pressure_Pa']:.0f} / {r['hydrostatic_Pa']:.0f} Pa, "
         f"{r['bottom_pressure_Pa'] / r['hydrostatic_Pa'] - 1:+.1%}")
-    return (f"| {r['dx']:g} | {r['dt'] * 1e3:g} ms | {r['eps0']:g} | {r['alpha']:g} | "
+    finished = "yes" if r["finished"] else f"stopped at {r['end_s']:.2f} s"
+    return (f"| {r['dx']:g} | {r['dt'] * 1e3:g} ms | {r['eps0']:g} | {r['alpha']:g} | {r['options']} | "
             f"{fmt(r['arrival_s'], '.3f')} ({fmt(seed, 'g')}) | {fmt(r['fraction_in_layer'], '.3f')} | "
             f"{fmt(r['drift_at_arrival'], '+.1%')} | {r['drift_min']:+.1%} ({r['t_min']:.2f} s) | "
-            f"{r['drift_max']:+.1%} ({r['t_max']:.2f} s) | {r['drift_end']:+.1%} | "
-            f"{r['in_layer_end']:.1%} | {pressure} | {fmt(r['pool_gradient'], '.3f')} | {fmt(r['wall_s'], '.0f')} |")
+            f"{r['drift_max']:+.1%} ({r['t_max']:.2f} s) | {fmt(r['drift_end'], '+.1%')} | "
+            f"{fmt(r['in_layer_end'], '.1%')} | {pressure} | {fmt(r['pool_gradient'], '.3f')} | "
+            f"{r['max_speed']:.2f} ({r['t_max_speed']:.2f} s) | {finished} | {fmt(r['wall_s'], '.0f')} |")
 
 
-HEADER = ("| dx (m) | dt | eps0 | alpha | arrival (s) (seed) | water in layer at arrival | volume at arrival | "
+HEADER = ("| dx (m) | dt | eps0 | alpha | shifting / collisions / advection | arrival (s) (seed) | "
+          "water in layer at arrival | volume at arrival | "
           "volume lowest (t) | volume highest (t) | volume at end | in layer at end | "
-          "bottom pressure vs hydrostatic | pool dP/dz / (rho_w g) | wall time (s) |")
+          "bottom pressure vs hydrostatic | pool dP/dz / (rho_w g) | largest speed m/s (t) | finished | "
+          "wall time (s) |")
 
 
 def main(paths):
