@@ -118,62 +118,79 @@ class SoilStep:
             self.adrag.fill(0.0)
 
     # ------------------------------------------------------------------ kernels
+    @ti.func
+    def _soil_stress_at(self, i, dt):
+        """Soil particle i in the pair pass of solver.py: strain and spin rates (eq 37-38), density (eq 48),
+        stress (eq 42-45). Reads the packed view s of its soil and wall neighbours only (the water's
+        pressure of this step is not known yet: `_k_soil_pore` interpolates it after the pass)."""
+        si = self.s[i]
+        xi = self._pos(si)
+        vi = self._vel(si)
+        rhoi = si[self.S_RHO]
+        h = self.h0
+        L = ti.Matrix.zero(float, self.dim, self.dim)
+        for k in range(self.grid.nbr_count[i]):
+            j = self.grid.nbr[i, k]
+            sj = self.s[j]
+            kj = sj[self.S_KIND]
+            if kj != SOIL and kj != WALL:
+                continue
+            rij = operators.rel(xi, self._pos(sj), self.period)
+            r2 = rij.dot(rij)
+            if r2 >= 4.0 * h * h or r2 == 0.0:
+                continue
+            r = ti.sqrt(r2)
+            gw = kernels.dw_dr(r, h, self.dim) / r * rij
+            if kj == SOIL:
+                L += sj[self.S_M] / sj[self.S_RHO] * (self._vel(sj) - vi).outer_product(gw)
+            else:
+                db = self.wdepth[j]
+                nrm = self.normal[j]
+                beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
+                vij = terms.boundary_relative_velocity(vi - self.v[j], nrm, beta, self.no_slip)
+                L -= self.vol0 * vij.outer_product(gw)
+        # dt = 0 (the pass of initial_diagnostics) leaves the stress as it is: the return mapping would
+        # otherwise re-project a stress lying on the yield surface and move it by rounding
+        if dt > 0.0:
+            sig, dgam, _e = soil.stress_update(self.sig[i], L, dt, self.e0, self.p_ref, self.m_exp,
+                                               self.p_floor, self.nu_s, self.k_fac, self.sin_phi, self.c_cos,
+                                               self.t_cut, self.dim, self.sin_psi, self.dilatant)
+            self.sig[i] = sig
+            self.eps_p[i] += dgam
+        self.rho[i] = rhoi * (1.0 - L.trace() * dt)
+        if ti.static(not self.coupled):
+            self.pore[i] = 0.0
+            self.p[i] = 0.0
+            self.phi_w[i] = 0.0
+
     @ti.kernel
-    def _k_soil_stress(self, dt: float):
-        """Strain and spin rates (eq 37-38), density (eq 48), stress (eq 42-45), pore pressure (eq 5)."""
+    def _k_soil_pore(self):
+        """Pore pressure at the soil particles from the water's pressure of this step, p_i = sum_w V_j p_j
+        W_ij / sum_w V_j W_ij (eq 5, Shepard-normalised), and the water presence phi_w."""
+        h = self.h0
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.fmask[i] == 2:
-                si = self.s[i]
-                xi = self._pos(si)
-                vi = self._vel(si)
-                rhoi = si[self.S_RHO]
-                h = self.h0
-                L = ti.Matrix.zero(float, self.dim, self.dim)
+                xi = self.x[i]
                 pn = 0.0
                 pd = 0.0
                 pdw = 0.0
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
-                    sj = self.s[j]
-                    rij = operators.rel(xi, self._pos(sj), self.period)
+                    kj = self.kind[j]
+                    if kj != WATER and kj != WALL:
+                        continue
+                    rij = operators.rel(xi, self.x[j], self.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * h * h:
                         continue
-                    kj = sj[self.S_KIND]
+                    wij = kernels.w(ti.sqrt(r2), h, self.dim)
                     if kj == WATER:
-                        if ti.static(self.coupled):
-                            wij = kernels.w(ti.sqrt(r2), h, self.dim)
-                            vj = sj[self.S_M] / self.rho[j]
-                            pn += vj * self.p[j] * wij
-                            pd += vj * wij
-                        continue
-                    if ti.static(self.coupled):  # noqa: SIM102 (compile-time if)
-                        if kj == WALL:
-                            pdw += self.vol0 * kernels.w(ti.sqrt(r2), h, self.dim)
-                    if r2 == 0.0:
-                        continue
-                    r = ti.sqrt(r2)
-                    gw = kernels.dw_dr(r, h, self.dim) / r * rij
-                    if kj == SOIL:
-                        L += sj[self.S_M] / sj[self.S_RHO] * (self._vel(sj) - vi).outer_product(gw)
-                    elif kj == WALL:
-                        db = self.wdepth[j]
-                        nrm = self.normal[j]
-                        beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
-                        vij = terms.boundary_relative_velocity(vi - self.v[j], nrm, beta, self.no_slip)
-                        L -= self.vol0 * vij.outer_product(gw)
-                rho = rhoi * (1.0 - L.trace() * dt)
-                # dt = 0 (the interpolation pass of initial_diagnostics) leaves the stress as it is: the return
-                # mapping would otherwise re-project a stress lying on the yield surface and move it by rounding
-                if dt > 0.0:
-                    sig, dgam, _e = soil.stress_update(self.sig[i], L, dt, self.e0, self.p_ref, self.m_exp,
-                                                       self.p_floor, self.nu_s, self.k_fac, self.sin_phi, self.c_cos,
-                                                       self.t_cut, self.dim, self.sin_psi, self.dilatant)
-                    self.sig[i] = sig
-                    self.eps_p[i] += dgam
-                self.rho[i] = rho
-                self.q[i][self.Q_RHO] = rho
+                        vj = self.m[j] / self.rho[j]
+                        pn += vj * self.p[j] * wij
+                        pd += vj * wij
+                    else:
+                        pdw += self.vol0 * wij
                 pore = 0.0
                 if pd > 0.0:
                     pore = pn / pd
@@ -447,10 +464,9 @@ class SoilStep:
         self.red_drag[None] = out
 
     # ------------------------------------------------------------------ host side
-    def _soil_stress(self, dt: float):
-        self._k_soil_stress(dt)
-
     def _soil_forces(self, dt: float):
+        if self.coupled:
+            self._k_soil_pore()
         self._k_soil_forces(dt)
         r = self.red_soil[None].to_numpy()
         self.red_s = r

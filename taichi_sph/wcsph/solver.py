@@ -167,6 +167,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.v = vec(dim, float, n)  # leap-frog velocity v^{n+1/2}
         self.a = vec(dim, float, n)
         self.xs = vec(dim, float, n)  # XSPH correction eq 53
+        self.rate = vec(2, float, n)  # divergence D of eq 25 from the last two pair passes (D^{n-1/2}, D^{n-3/2})
         self.normal = vec(dim, float, n)
         self.x0 = vec(dim, float, n)  # positions at the last neighbour-list build
         self.rho = ti.field(float, n)
@@ -180,7 +181,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.ids = ti.field(ti.i32, n)
         self.active = ti.field(ti.i32, n)
         self.fmask = ti.field(ti.i32, n)
-        self.particle_fields = [self.x, self.v, self.a, self.xs, self.normal, self.rho, self.p, self.h, self.m,
+        self.particle_fields = [self.x, self.v, self.a, self.xs, self.rate, self.normal, self.rho, self.p, self.h, self.m,
                                 self.wdepth, self.kind, self.ids, self.active]
         self._soil_fields(n)
 
@@ -206,6 +207,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.h.fill(self.h0)
         self.a.fill(0.0)
         self.xs.fill(0.0)
+        self.rate.fill(0.0)
         # obstacles with a prescribed motion (sph/wall_motion.py), moved by the kick-drift; their wall
         # particles' v is the wall velocity of eq 50-51
         self.motion = WallMotion(scene, dim, self.period, f)
@@ -224,10 +226,12 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.hmax = self.h0
         self.rebuilds = 0
         self.dt_prev = 0.0
+        self.dt_prev2 = 0.0
+        self.rates_known = 0  # pair passes behind the divergences in `rate` (at most 2)
         self.removed_total = 0
         self.step_count = 0
         self.time = 0.0
-        self.timers = {k: 0.0 for k in ("update", "neighbours", "density", "forces")}
+        self.timers = {k: 0.0 for k in ("update", "neighbours", "pairs", "soil")}
         self.red = np.zeros(_NRED)
         self.last = {}
 
@@ -292,18 +296,36 @@ class WCSPHSolver(SoilStep, SolverCommon):
         return hij
 
     @ti.func
-    def _pack(self, i):
+    def _pack_s(self, i):
+        """View s of particle i: x^{n+1}, v^{n+1/2}, rho^n, m, kind[, h^n]."""
         for d in ti.static(range(self.dim)):
             self.s[i][d] = self.x[i][d]
             self.s[i][self.S_V + d] = self.v[i][d]
         self.s[i][self.S_RHO] = self.rho[i]
         self.s[i][self.S_M] = self.m[i]
         self.s[i][self.S_KIND] = ti.cast(self.kind[i], float)
-        self.q[i][self.Q_RHO] = self.rho[i]
-        self.q[i][self.Q_PR] = self.p[i] / (self.rho[i] * self.rho[i])
         if ti.static(self.variable_h):
             self.s[i][self.S_H] = self.h[i]
-            self.q[i][self.Q_H] = self.h[i]
+
+    @ti.func
+    def _pack_q(self, i, dt, w1, w2):
+        """View q of particle i: the state the pair pass takes its pressures from. For a fluid particle the
+        density predicted to the end of the step, rho~ = rho^n (1 - D~ dt) with the divergence extrapolated
+        from the last two pair passes, D~ = w1 D^{n-1/2} + w2 D^{n-3/2} (docs/wcsph.md, "One step"), its
+        pressure p~ / rho~^2 by the equations of state and h~ by eq 52; rho^n and p^n with dt = 0."""
+        rho = self.rho[i]
+        pr = self.p[i] / (rho * rho)
+        h = self.h[i]
+        if self.fmask[i] == 1 and dt > 0.0:
+            dd = (w1 * self.rate[i][0] + w2 * self.rate[i][1]) * dt
+            rho = rho * (1.0 - dd)
+            pr = self._eos_pressure(self.kind[i], rho) / (rho * rho)
+            if ti.static(self.variable_h):
+                h = ti.min(ti.max(h * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
+        self.q[i][self.Q_RHO] = rho
+        self.q[i][self.Q_PR] = pr
+        if ti.static(self.variable_h):
+            self.q[i][self.Q_H] = h
 
     # ------------------------------------------------------------------ kernels
     @ti.kernel
@@ -316,18 +338,19 @@ class WCSPHSolver(SoilStep, SolverCommon):
                     self.fmask[i] = 2  # soil: moved by kick-drift, its own passes (soil_step.py)
 
     @ti.kernel
-    def _k_after_build(self):
+    def _k_after_build(self, dt: float, w1: float, w2: float):
         """After a list build: positions at build time and the packed views."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             self.x0[i] = self.x[i]
-            self._pack(i)
+            self._pack_s(i)
+            self._pack_q(i, dt, w1, w2)
 
     @ti.kernel
-    def _k_kick_drift(self, dt: float, dt_prev: float):
-        """Leap-frog (eq 48): kick with a^n, drift with v^{n+1/2} plus the XSPH correction (eq 53); the
-        density and h of the last density pass become the start values of this one. Returns the largest
-        squared displacement since the last list build and the largest h."""
+    def _k_kick_drift(self, dt: float, dt_prev: float, w1: float, w2: float):
+        """Leap-frog (eq 48): kick with a^n, drift with v^{n+1/2} plus the XSPH correction (eq 53); then the
+        packed views of the pair pass (`_pack_s`, `_pack_q`). Returns the largest squared displacement
+        since the last list build and the largest h the pair pass will use."""
         d2max = 0.0
         hmax = 0.0
         ti.loop_config(serialize=self.serial)
@@ -344,16 +367,12 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 if ti.static(self.periodic):
                     xn = operators.wrap(xn, self.period)
                 self.x[i] = xn
-                for d in ti.static(range(self.dim)):
-                    self.s[i][d] = xn[d]
-                    self.s[i][self.S_V + d] = vh[d]
-                self.s[i][self.S_RHO] = self.q[i][self.Q_RHO]
+                self._pack_s(i)
+                self._pack_q(i, dt, w1, w2)
                 dd = operators.rel(xn, self.x0[i], self.period)
                 ti.atomic_max(d2max, dd.dot(dd))
                 if ti.static(self.variable_h):
-                    hi = self.q[i][self.Q_H]
-                    self.s[i][self.S_H] = hi
-                    ti.atomic_max(hmax, hi)
+                    ti.atomic_max(hmax, self.q[i][self.Q_H])
             if ti.static(self.moving):  # noqa: SIM102 (compile-time if)
                 if self.wall_body[i] >= 0:  # a moving obstacle's wall particle: its velocity over this step
                     vb = self.motion.vel[self.wall_body[i]]
@@ -368,94 +387,51 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.red_kick[None] = ti.Vector([d2max, hmax])
 
     @ti.kernel
-    def _k_density(self, dt: float, normalise: ti.template()):
-        """Density pass at x^{n+1} with v^{n+1/2}: divergence D_i = sum_j V_j (v_j - v_i) . grad_i W_ij
-        (eq 25 in volume form; walls with the virtual velocity of eq 50-51), rho^{n+1} = rho^n (1 - D_i dt)
-        (eq 48), h^{n+1} = h^n (1 + D_i dt / d) (eq 52), the XSPH correction (eq 53) and, when `normalise`,
-        eq 27 applied to rho^n first: rho_i = sum_{j in a} m_j W_ij / sum_{j in a} (m_j / rho_j) W_ij over
-        the material a of i (self included) and the wall particles, each standing for i's material at
-        rho_w = rho_i (1 + g . d_n / c_i^2) (hydrostatic across the wall, d_n the normal part of x_w - x_i,
-        volume dx^d). Then the equations of state (eq 39-41). Reads the view s, writes the view q and the
-        particle's own fields."""
+    def _k_normalise(self, dt: float, w1: float, w2: float):
+        """Eq 27 every `normalise_every` steps, before the pair pass: rho_i^n = sum_{j in a} m_j W_ij /
+        sum_{j in a} (m_j / rho_j) W_ij over the material a of i (self included) and the wall particles,
+        each standing for i's material at rho_w = rho_i (1 + g . d_n / c_i^2) (hydrostatic across the wall,
+        d_n the normal part of x_w - x_i, volume dx^d). Reads the view s, writes rho^n and the view q."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.fmask[i] == 1:
                 si = self.s[i]
                 xi = self._pos(si)
-                vi = self._vel(si)
                 ki = si[self.S_KIND]
                 rhoi = si[self.S_RHO]
                 hi = self.h0
                 if ti.static(self.variable_h):
                     hi = si[self.S_H]
-                num = 0.0
-                den = 0.0
-                c2i = 0.0
-                if ti.static(normalise):
-                    w0 = kernels.w(0.0, hi, self.dim)
-                    num = si[self.S_M] * w0
-                    den = si[self.S_M] / rhoi * w0
-                    c2i = self._sound_speed(ki, rhoi) ** 2
-                div = 0.0
-                xs = ti.Vector.zero(float, self.dim)
+                w0 = kernels.w(0.0, hi, self.dim)
+                num = si[self.S_M] * w0
+                den = si[self.S_M] / rhoi * w0
+                c2i = self._sound_speed(ki, rhoi) ** 2
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
-                    if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if); soil couples by drag only
-                        if sj[self.S_KIND] == SOIL:
-                            continue
+                    kj = sj[self.S_KIND]
+                    same = kj == ki
+                    if kj != WALL and not same:
+                        continue
                     hij = self._h_pair(hi, sj)
                     rij = operators.rel(xi, self._pos(sj), self.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * hij * hij or r2 == 0.0:
                         continue
-                    r = ti.sqrt(r2)
-                    wij, dwdr = kernels.w_and_dw_dr(r, hij, self.dim)
-                    gw = dwdr / r * rij
-                    kj = sj[self.S_KIND]
+                    wij = kernels.w(ti.sqrt(r2), hij, self.dim)
                     if kj == WALL:
-                        db = self.wdepth[j]
+                        # the wall's mirror image of i's material, hydrostatic across the wall: without it
+                        # eq 27 averages the row next to a floor with the rows above only (lighter)
                         nrm = self.normal[j]
-                        beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
-                        vij = terms.boundary_relative_velocity(vi - self._vel(sj), nrm, beta, self.no_slip)
-                        div -= self.vol0 * vij.dot(gw)
-                        if ti.static(normalise):
-                            # the wall's mirror image of i's material, hydrostatic across the wall: without
-                            # it eq 27 averages the row next to a floor with the rows above only (lighter)
-                            dxn = (-rij).dot(nrm) * nrm
-                            rho_w = rhoi * (1.0 + self.g.dot(dxn) / c2i)
-                            num += rho_w * self.vol0 * wij
-                            den += self.vol0 * wij
+                        dxn = (-rij).dot(nrm) * nrm
+                        num += rhoi * (1.0 + self.g.dot(dxn) / c2i) * self.vol0 * wij
+                        den += self.vol0 * wij
                     else:
-                        vij = vi - self._vel(sj)
                         mj = sj[self.S_M]
-                        rhoj = sj[self.S_RHO]
-                        div -= mj / rhoj * vij.dot(gw)
-                        same = True
-                        if ti.static(self.has_air):
-                            same = kj == ki
-                        if ti.static(self.xsph_on or normalise):
-                            if ti.static(self.xsph_on):
-                                xs += terms.xsph(mj, rhoi, rhoj, vij, wij)
-                            if ti.static(normalise):  # noqa: SIM102 (compile-time if)
-                                if same:
-                                    num += mj * wij
-                                    den += mj / rhoj * wij
-                if ti.static(normalise):
-                    rhoi = num / den
-                dd = div * dt
-                rho = rhoi * (1.0 - dd)
-                p = self._eos_pressure(self.kind[i], rho)
-                self.rho[i] = rho
-                self.p[i] = p
-                self.q[i][self.Q_RHO] = rho
-                self.q[i][self.Q_PR] = p / (rho * rho)
-                if ti.static(self.xsph_on):
-                    self.xs[i] = self.xsph_eps * xs
-                if ti.static(self.variable_h):
-                    hn = ti.min(ti.max(hi * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
-                    self.h[i] = hn
-                    self.q[i][self.Q_H] = hn
+                        num += mj * wij
+                        den += mj / sj[self.S_RHO] * wij
+                self.rho[i] = num / den
+                self._pack_q(i, dt, w1, w2)
 
     @ti.kernel
     def _k_wall_pressure(self):
@@ -491,10 +467,17 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 self.p[i] = pw
 
     @ti.kernel
-    def _k_forces(self, dt: float):
-        """Accelerations at x^{n+1}, rho^{n+1}: eq 34 (pressure; Morris viscosity with v^{n+1/2}), eq 36,
-        eq 54 and gravity; reductions: kinetic energy, max speed, water volume, min h/|a|, min h/c,
-        non-finite count, first bad id, min h, air volume."""
+    def _k_pairs(self, dt: float):
+        """The pair pass at x^{n+1} with v^{n+1/2}, one walk over each fluid particle's neighbours for:
+        - continuity: D_i = sum_j V_j (v_j - v_i) . grad_i W_ij (eq 25 in volume form, V_j = m_j / rho_j^n;
+          walls with the virtual velocity of eq 50-51), rho^{n+1} = rho^n (1 - D_i dt) (eq 48),
+          h^{n+1} = h^n (1 + D_i dt / d) (eq 52), the XSPH correction (eq 53), then the equations of state
+          (eq 39-41); D_i is kept for the next two predictions of `_pack_q`;
+        - forces with the predicted rho~, p~ of the view q: eq 34 (pressure; Morris viscosity with
+          v^{n+1/2}), eq 36, eq 54 and gravity.
+        Soil particles take their stress update in the same loop (soil_step.py). Reductions: kinetic energy,
+        max speed, water volume, min h/|a|, min h/c, non-finite count, first bad id, min h, air volume.
+        With dt = 0 (initial_diagnostics) the density, pressure, h and XSPH correction stay as they are."""
         ke = 0.0
         vmax = 0.0
         vol = 0.0
@@ -511,12 +494,12 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 qi = self.q[i]
                 xi = self._pos(si)
                 vi = self._vel(si)
+                rho_n = self.rho[i]
                 rhoi = qi[self.Q_RHO]
                 pri = qi[self.Q_PR]
                 pi = pri * rhoi * rhoi
                 mi = si[self.S_M]
                 ki = self.kind[i]
-                voli = mi / rhoi
                 hi = self.h0
                 if ti.static(self.variable_h):
                     hi = qi[self.Q_H]
@@ -524,6 +507,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 c0i = self._c0(ki)
                 cohi = self._cohesion(ki)
                 acc = self.g
+                div = 0.0
+                xs = ti.Vector.zero(float, self.dim)
                 # pressure acceleration, and the share of it the walls take through the gradient at i
                 accp = ti.Vector.zero(float, self.dim)
                 m_wall = ti.Matrix.zero(float, self.dim, self.dim)
@@ -531,10 +516,10 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
-                    qj = self.q[j]
-                    if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if)
+                    if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if); soil couples by drag only
                         if sj[self.S_KIND] == SOIL:
                             continue
+                    qj = self.q[j]
                     hij = self.h0
                     if ti.static(self.variable_h):
                         hij = 0.5 * (hi + qj[self.Q_H])
@@ -543,11 +528,15 @@ class WCSPHSolver(SoilStep, SolverCommon):
                     if r2 >= 4.0 * hij * hij or r2 == 0.0:
                         continue
                     r = ti.sqrt(r2)
-                    dwdr = kernels.dw_dr(r, hij, self.dim)
+                    wij = 0.0
+                    dwdr = 0.0
+                    if ti.static(self.xsph_on):
+                        wij, dwdr = kernels.w_and_dw_dr(r, hij, self.dim)
+                    else:
+                        dwdr = kernels.dw_dr(r, hij, self.dim)
                     gw = dwdr / r * rij
                     f_ij = operators.laplacian_weight(r, hij, self.eta2, self.dim)
                     kj = sj[self.S_KIND]
-                    prj = qj[self.Q_PR]
                     if kj == WALL:
                         # boundary particle: the virtual velocity of eq 50-51, the density of i and the
                         # pressure of i extrapolated hydrostatically to it (Neumann condition)
@@ -555,6 +544,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
                         nrm = self.normal[j]
                         beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
                         vij = terms.boundary_relative_velocity(vi - self._vel(sj), nrm, beta, self.no_slip)
+                        div -= self.vol0 * vij.dot(gw)
                         mj = rhoi * self.vol0
                         # pressure at the wall particle: hydrostatic across the wall, the gradient at i
                         # along it (mirror image of the excess pressure), p_w = p_i + rho_i g . d_n +
@@ -572,16 +562,17 @@ class WCSPHSolver(SoilStep, SolverCommon):
                             acc -= mj * pij * gw
                     else:
                         vij = vi - self._vel(sj)
-                        rhoj = qj[self.Q_RHO]
                         mj = sj[self.S_M]
+                        div -= mj / sj[self.S_RHO] * vij.dot(gw)
+                        if ti.static(self.xsph_on):
+                            xs += terms.xsph(mj, si[self.S_RHO], sj[self.S_RHO], vij, wij)
+                        rhoj = qj[self.Q_RHO]
+                        prj = qj[self.Q_PR]
                         same = True
                         if ti.static(self.has_air):
                             same = kj == ki
                         if same:
                             accp += terms.pressure_same_material(mj, pri, prj, gw)
-                        else:
-                            accp += terms.pressure_interface(mi, voli, mj / rhoj, pi, prj * rhoj * rhoj, gw)
-                        if same:
                             acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nui, f_ij) * vij
                             if ti.static(self.av_on):
                                 pij = terms.artificial_viscosity(vij, rij, r2, hij, c0i, 0.5 * (rhoi + rhoj),
@@ -590,12 +581,26 @@ class WCSPHSolver(SoilStep, SolverCommon):
                             if ti.static(self.cohesion_on):
                                 acc += terms.cohesion(cohi, mj, gw)
                         else:
+                            accp += terms.pressure_interface(mi, mi / rhoi, mj / rhoj, pi, prj * rhoj * rhoj, gw)
                             nuj = self._nu(ti.cast(kj, ti.i32))
                             acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nuj, f_ij) * vij
                 # a_p = A_p + m_wall a_p (the walls' tangential terms carry G_i = -rho_i a_p)
                 acc += operators.wall_mirror_solve(accp, m_wall, hyd_t)
                 self.a[i] = acc
+                self.rate[i] = ti.Vector([div, self.rate[i][0]])
+                rho = rho_n
+                if dt > 0.0:
+                    dd = div * dt
+                    rho = rho_n * (1.0 - dd)
+                    p = self._eos_pressure(ki, rho)
+                    self.rho[i] = rho
+                    self.p[i] = p
+                    if ti.static(self.xsph_on):
+                        self.xs[i] = self.xsph_eps * xs
+                    if ti.static(self.variable_h):
+                        self.h[i] = ti.min(ti.max(si[self.S_H] * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
                 # reductions
+                voli = mi / rho
                 vs = vi + 0.5 * dt * acc  # synchronised velocity at this time
                 s2 = vs.dot(vs)
                 ke += 0.5 * mi * s2
@@ -607,17 +612,21 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 an = acc.norm()
                 if an > 0.0:
                     ti.atomic_min(h_over_a, hi / an)
-                ti.atomic_min(h_over_c, hi / self._sound_speed(ki, rhoi))
+                ti.atomic_min(h_over_c, hi / self._sound_speed(ki, rho))
                 ti.atomic_min(hmin, hi)
-                val = s2 + pi + xi.sum() + rhoi
+                val = s2 + pi + xi.sum() + rho
                 if ti.math.isnan(val) or ti.math.isinf(val):
                     bad += 1.0
                     ti.atomic_min(first_bad, float(self.ids[i]))
+            if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if)
+                if self.fmask[i] == 2:
+                    self._soil_stress_at(i, dt)
         self.red_forces[None] = ti.Vector([ke, vmax, vol, h_over_a, h_over_c, bad, first_bad, hmin, vol_air])
 
     # ------------------------------------------------------------------ step
-    def neighbour_search(self):
-        """Sort into cells, reorder every particle array, rebuild the lists with the Verlet skin."""
+    def neighbour_search(self, dt: float = 0.0, w=(0.0, 0.0)):
+        """Sort into cells, reorder every particle array, rebuild the lists with the Verlet skin; then the
+        packed views for a pair pass over a step of length dt with the prediction weights w (`_weights`)."""
         self._sort_and_reorder()
         self._k_mask()
         self.r_list = min(self.cell, 2.0 * self.hmax + self.skin)
@@ -625,14 +634,23 @@ class WCSPHSolver(SoilStep, SolverCommon):
             self.grid.build_neighbour_lists(self.x, self.fmask, self.n, self.r_list, self.ids)
         except NeighbourOverflowError as exc:
             raise guard.neighbour_overflow_error(self.step_count, self.time, exc) from None
-        self._k_after_build()
+        self._k_after_build(dt, w[0], w[1])
         self.rebuilds += 1
 
-    def _forces(self, dt: float):
-        t0 = _time.perf_counter()
-        self._k_forces(dt)
+    def _weights(self, dt: float) -> tuple[float, float]:
+        """Weights (w1, w2) of the divergence predicted for this step, D~ = w1 D^{n-1/2} + w2 D^{n-3/2}: the
+        line through the last two (the rates at the half steps t^{n-1/2}, t^{n-3/2}) taken to t^{n+1/2},
+        w1 = 1 + c, w2 = -c with c = (dt^n + dt^{n-1}) / (dt^{n-1} + dt^{n-2}); the last one alone (w1 = 1)
+        after one pass, none before (docs/wcsph.md, "One step")."""
+        if self.rates_known >= 2:
+            c = (dt + self.dt_prev) / (self.dt_prev + self.dt_prev2)
+            return 1.0 + c, -c
+        return (1.0, 0.0) if self.rates_known == 1 else (0.0, 0.0)
+
+    def _pairs(self, dt: float):
+        self._k_pairs(dt)
+        self.rates_known = min(self.rates_known + 1, 2)
         self.red = self.red_forces[None].to_numpy()
-        self._tick("forces", t0)
         r = self.red
         self.last = {"kinetic_energy": float(r[0]), "max_speed": float(r[1]), "water_volume": float(r[2]),
                      "air_volume": float(r[8])}
@@ -644,7 +662,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
         t0 = _time.perf_counter()
         if self.moving:
             self.motion.set_step(self.time, self.time + dt)
-        self._k_kick_drift(dt, self.dt_prev)
+        w = self._weights(dt)
+        self._k_kick_drift(dt, self.dt_prev, w[0], w[1])
         d2max, hmax = self.red_kick[None].to_numpy()
         if self.variable_h:
             self.hmax = float(hmax)
@@ -655,26 +674,25 @@ class WCSPHSolver(SoilStep, SolverCommon):
         if len(released):
             activate(self, released)
         if len(released) or 2.0 * math.sqrt(max(float(d2max), 0.0)) + 2.0 * self.hmax > self.r_list:
-            self.neighbour_search()
+            self.neighbour_search(dt, w)
         t0 = self._tick("neighbours", t0)
-        self._k_density(dt, self.normalised and self.step_count % self.normalise_every == 0)
-        if self.has_soil:
-            self._soil_stress(dt)
-        self._tick("density", t0)
-        self._forces(dt)
+        if self.normalised and self.step_count % self.normalise_every == 0:
+            self._k_normalise(dt, w[0], w[1])
+        self._pairs(dt)
+        t0 = self._tick("pairs", t0)
         if self.has_soil:
             self._soil_forces(dt)
+            self._tick("soil", t0)
+        self.dt_prev2 = self.dt_prev
         self.dt_prev = dt
         return self.last
 
     def initial_diagnostics(self) -> dict:
-        """Neighbour lists, wall pressure and forces at t = 0 (the first step needs a^0). The soil's pore
-        pressure and water presence are interpolated first (a stress pass with dt = 0 changes nothing
-        else), so that a^0 of the soil sees its pore pressure."""
+        """Neighbour lists, forces at t = 0 (the first step needs a^0) and the divergence D^0 that the first
+        steps' predictions start from. The soil's pore pressure and water presence are interpolated before
+        its forces, so that a^0 of the soil sees its pore pressure."""
         self.neighbour_search()
-        if self.has_soil:
-            self._soil_stress(0.0)
-        self._forces(0.0)
+        self._pairs(0.0)
         if self.has_soil:
             self._soil_forces(0.0)
         return self.last
@@ -734,11 +752,11 @@ class WCSPHSolver(SoilStep, SolverCommon):
     #: the last list build; with the Verlet neighbour lists themselves (kept between rebuilds); the soil's
     #: effective stress, plastic strain, pore pressure, water presence and drag (soil_step.py; one-element
     #: fields in a scene without soil).
-    state_fields = ("x", "v", "a", "xs", "normal", "x0", "rho", "p", "h", "m", "wdepth", "kind", "ids", "active",
+    state_fields = ("x", "v", "a", "xs", "rate", "normal", "x0", "rho", "p", "h", "m", "wdepth", "kind", "ids", "active",
                     "fmask", "s", "q", "sig", "eps_p", "pore", "phi_w", "adrag", "wall_body",
                     "wall_origin")
-    state_scalars = ("step_count", "time", "removed_total", "dt_prev", "r_list", "hmax", "rebuilds", "red",
-                     "red_s")
+    state_scalars = ("step_count", "time", "removed_total", "dt_prev", "dt_prev2", "rates_known", "r_list", "hmax",
+                     "rebuilds", "red", "red_s")
 
     def state(self) -> dict:
         """Full state for a checkpoint, {name: numpy array or scalar} (sph/state.py)."""
