@@ -7,25 +7,31 @@ boundary particles with the Morris/Takeda virtual velocity (eq 50-51). One step 
 dt = Delta t^n starts from the accelerations a^n of the previous step (or `initial_diagnostics`):
 
 1. kick-drift (leap-frog, eq 48): v^{n+1/2} = v^{n-1/2} + (Delta t^{n-1} + Delta t^n) / 2 a^n,
-   x^{n+1} = x^n + Delta t (v^{n+1/2} + XSPH correction of eq 53).
+   x^{n+1} = x^n + Delta t (v^{n+1/2} + XSPH correction of eq 53); the packed views of the pair pass,
+   with each fluid particle's density predicted to the end of the step, rho~ = rho^n (1 - D~ Delta t),
+   D~ the divergence of eq 25 extrapolated along the line through the last two pair passes, and its
+   pressure from the equations of state (eq 39-41).
 2. neighbour lists, rebuilt only when some particle has moved far enough to need it (Verlet skin).
-3. density pass at x^{n+1} with v^{n+1/2}: divergence D_i (eq 25 in volume form), rho^{n+1} =
-   rho^n (1 - D_i Delta t) (eq 48), h^{n+1} = h^n (1 + D_i Delta t / d) (eq 52), the XSPH correction,
-   every `normalise_every` steps eq 27 (normalised density over the same material) applied first;
-   pressure from the equations of state (eq 39-41). Advancing the density with the velocity that
-   moved the particles keeps the (density, velocity) pair symplectic; rates from the previous force
-   pass (one pass per step) make the acoustic modes grow like forward Euler and blow up a tank at rest.
-4. force pass: eq 34 (pressure, Morris viscosity), eq 36 (artificial viscosity), eq 54 (cohesion),
-   gravity; a wall particle seen from fluid particle i has the velocity of eq 50-51, the density of i
-   and the pressure of i extrapolated hydrostatically, p_i + rho_i g . (x_w - x_i); the reductions
-   eq 49 and the diagnostics need, returned as one small vector (the
-   only transfer to the host per step besides the list-rebuild test).
+3. every `normalise_every` steps eq 27 (normalised density over the same material), its own pass.
+4. pair pass at x^{n+1} with v^{n+1/2}, one walk over the neighbours of each fluid particle for both:
+   the divergence D_i (eq 25 in volume form), rho^{n+1} = rho^n (1 - D_i Delta t) (eq 48),
+   h^{n+1} = h^n (1 + D_i Delta t / d) (eq 52), the XSPH correction; and the accelerations a^{n+1} from
+   rho~, p~: eq 34 (pressure, Morris viscosity), eq 36 (artificial viscosity), eq 54 (cohesion), gravity;
+   a wall particle seen from fluid particle i has the velocity of eq 50-51, the density of i and the
+   pressure of i extrapolated hydrostatically; the reductions eq 49 and the diagnostics need, returned
+   as one small vector (the only transfer to the host per step besides the list-rebuild test).
+   The density the forces see differs from rho^{n+1} by order Delta t^3 d^3 rho / dt^3: the exact
+   pair of passes (density, then forces with rho^{n+1}) needs every neighbour's new density before any
+   force. With the previous pass's rate alone (rho~ = rho^n at D~ = 0, or D~ = D^{n-1/2}) the acoustic
+   modes grow; with the line through the last two they decay slightly and stay stable up to a Courant
+   number of 0.65 (docs/wcsph.md, "One step").
 
-The two pair loops read each neighbour from one packed vector (x, v, rho, p / rho^2, m, kind[, h]): one
-contiguous load per neighbour instead of six. Physics a scene does not use is compiled out with
-ti.static flags (air, cohesion, artificial viscosity, XSPH, variable h, soil, moving walls, periodic
-axes; their values come from taichi_sph/switches.py). Soil (eq 35, 37-45) and the Biot drag (eq 46-47)
-join as a further kind in the same pair loops behind flags of their own (soil_step.py, docs/biot.md).
+The pair pass reads each neighbour from two packed vectors (s: x, v, rho^n, m, kind[, h]; q: rho~,
+p~ / rho~^2[, h~]): two contiguous loads per neighbour instead of eight. Physics a scene does not use is
+compiled out with ti.static flags (air, cohesion, artificial viscosity, XSPH, variable h, soil, moving
+walls, periodic axes; their values come from taichi_sph/switches.py). Soil (eq 35, 37-45) and the Biot drag
+(eq 46-47) join behind flags of their own: the soil's stress update in the loop of the pair pass, its
+forces and the drag in passes after it (soil_step.py, docs/biot.md).
 """
 
 import logging
@@ -142,9 +148,9 @@ class WCSPHSolver(SoilStep, SolverCommon):
         if self.has_soil and cfg.neighbours.max is None:  # soil overlaps the fluid: twice the neighbours
             self.max_nb *= 2
 
-        # packed neighbour views. s: x (dim), v (dim), rho, m, kind[, h] at the start of a step (read by the
-        # density pass); q: rho, p / rho^2[, h] after the density pass (read by the force pass). Each
-        # pass writes only fields that no particle reads in that pass, so every step is three loops.
+        # packed neighbour views, written by the kick-drift. s: x (dim), v (dim), rho^n, m, kind[, h^n];
+        # q: the predicted rho~, p~ / rho~^2[, h~] the pair pass takes its forces from. Each pass writes
+        # only fields that no particle reads in that pass, so every step is two loops.
         self.S_V = dim
         self.S_RHO = 2 * dim
         self.S_M = 2 * dim + 1
@@ -581,7 +587,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
                             if ti.static(self.cohesion_on):
                                 acc += terms.cohesion(cohi, mj, gw)
                         else:
-                            accp += terms.pressure_interface(mi, mi / rhoi, mj / rhoj, pi, prj * rhoj * rhoj, gw)
+                            accp += terms.pressure_interface(mi, mi / rhoi, mj / rhoj, pi, prj * rhoj * rhoj,
+                                                             gw)
                             nuj = self._nu(ti.cast(kj, ti.i32))
                             acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nuj, f_ij) * vij
                 # a_p = A_p + m_wall a_p (the walls' tangential terms carry G_i = -rho_i a_p)
@@ -638,14 +645,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.rebuilds += 1
 
     def _weights(self, dt: float) -> tuple[float, float]:
-        """Weights (w1, w2) of the divergence predicted for this step, D~ = w1 D^{n-1/2} + w2 D^{n-3/2}: the
-        line through the last two (the rates at the half steps t^{n-1/2}, t^{n-3/2}) taken to t^{n+1/2},
-        w1 = 1 + c, w2 = -c with c = (dt^n + dt^{n-1}) / (dt^{n-1} + dt^{n-2}); the last one alone (w1 = 1)
-        after one pass, none before (docs/wcsph.md, "One step")."""
-        if self.rates_known >= 2:
-            c = (dt + self.dt_prev) / (self.dt_prev + self.dt_prev2)
-            return 1.0 + c, -c
-        return (1.0, 0.0) if self.rates_known == 1 else (0.0, 0.0)
+        return prediction_weights(dt, self.dt_prev, self.dt_prev2, self.rates_known)
 
     def _pairs(self, dt: float):
         self._k_pairs(dt)
@@ -752,8 +752,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
     #: the last list build; with the Verlet neighbour lists themselves (kept between rebuilds); the soil's
     #: effective stress, plastic strain, pore pressure, water presence and drag (soil_step.py; one-element
     #: fields in a scene without soil).
-    state_fields = ("x", "v", "a", "xs", "rate", "normal", "x0", "rho", "p", "h", "m", "wdepth", "kind", "ids", "active",
-                    "fmask", "s", "q", "sig", "eps_p", "pore", "phi_w", "adrag", "wall_body",
+    state_fields = ("x", "v", "a", "xs", "rate", "normal", "x0", "rho", "p", "h", "m", "wdepth", "kind",
+                    "ids", "active", "fmask", "s", "q", "sig", "eps_p", "pore", "phi_w", "adrag", "wall_body",
                     "wall_origin")
     state_scalars = ("step_count", "time", "removed_total", "dt_prev", "dt_prev2", "rates_known", "r_list", "hmax",
                      "rebuilds", "red", "red_s")
@@ -769,6 +769,17 @@ class WCSPHSolver(SoilStep, SolverCommon):
         from ..sph.state import restore
 
         restore(self, state, self.state_fields, self.state_scalars, self.grid)
+
+
+def prediction_weights(dt: float, dt_prev: float, dt_prev2: float, known: int) -> tuple[float, float]:
+    """Weights (w1, w2) of the divergence predicted for the step dt, D~ = w1 D^{n-1/2} + w2 D^{n-3/2}: the
+    line through the last two pair passes' divergences (the rates of the half steps t^{n-1/2}, t^{n-3/2})
+    taken to t^{n+1/2}, w1 = 1 + c, w2 = -c with c = (dt + dt_prev) / (dt_prev + dt_prev2); the last one
+    alone after one pass (known = 1), none before (docs/wcsph.md, "One step")."""
+    if known >= 2:
+        c = (dt + dt_prev) / (dt_prev + dt_prev2)
+        return 1.0 + c, -c
+    return (1.0, 0.0) if known == 1 else (0.0, 0.0)
 
 
 def _exponent(gamma: float):
