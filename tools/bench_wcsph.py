@@ -9,8 +9,15 @@ processes on a shared machine slow some chunks down). Writes docs/performance_wc
 in docs/performance_wcsph.md.
 
     python tools/bench_wcsph.py [--dx 0.01 0.005] [--steps 300] [--warmup 200] [--precision f32 f64]
+    python tools/bench_wcsph.py --against /path/to/other/checkout --rounds 3 [...]
 
 Each precision runs in its own process (one Taichi runtime per process); the table holds them all.
+CPU seconds per wall second of the timed step loop (time.process_time against time.perf_counter; 2 =
+both cores of a 2-thread run busy) shows the serial parts and the interference of other processes.
+With --against, the same cases also run with the code of another checkout (its own copy of this
+tool, PYTHONPATH pointing there), alternating with this one `--rounds` times, so that both see the same
+machine load; the table then gains the per-round rates and their ratio, with the load average
+(os.getloadavg, 1 minute) at the start and end of each run.
 """
 
 from __future__ import annotations
@@ -98,6 +105,11 @@ def bench_case(dx: float, steps: int, warmup: int, overrides=(), until: float | 
     }
 
 
+def load_average() -> float:
+    """1-minute load average of the machine (processes running or waiting for a core)."""
+    return os.getloadavg()[0]
+
+
 def markdown(results, info) -> str:
     phases = list(results[0]["phase_seconds_per_step"])
     lines = [
@@ -111,17 +123,19 @@ def markdown(results, info) -> str:
         "particles. Times per step in milliseconds; JIT compilation excluded. The steps are timed in ten chunks;",
         "the fastest chunk is the rate with the least interference from other processes, and CPU seconds per",
         "wall second (2 = both cores busy with this run) shows how much of the machine the run had (the",
-        "machine is shared; the 20k runs, with ~2 ms loops, suffer most).",
+        "machine is shared; the 20k runs, with ~2 ms loops, suffer most). Load: the 1-minute load average at",
+        "the start / end of the run (other processes on the machine).",
         "",
         "| precision | dx | fluid particles | all particles | M particle-steps/s (mean) | (fastest chunk) | "
-        "CPU s / wall s | ms/step | steps per list rebuild | "
+        "CPU s / wall s | load | ms/step | steps per list rebuild | "
         + " | ".join(phases) + " | setup+warm-up s |",
-        "|---|---|---|---|---|---|---|---|---|" + "---|" * len(phases) + "---|",
+        "|---|---|---|---|---|---|---|---|---|---|" + "---|" * len(phases) + "---|",
     ]
     for r in results:
         ph = " | ".join(f"{1e3 * r['phase_seconds_per_step'][p]:.2f}" for p in phases)
         lines.append(f"| {r['precision']} | {r['dx']:g} | {r['fluid_particles']} | {r['all_particles']} | {r['mipps']:.2f} | "
                      f"{r['mipps_best_chunk']:.2f} | {r['cpu_over_wall']:.2f} | "
+                     f"{r['load_start_end'][0]:.1f} / {r['load_start_end'][1]:.1f} | "
                      f"{1e3 * r['seconds_per_step']:.2f} | {r['steps_per_rebuild']:.1f} | {ph} | "
                      f"{r['setup_and_warmup_seconds']:.1f} |")
     return "\n".join(lines) + "\n"
@@ -134,8 +148,10 @@ def run_one(args) -> list:
     be = backend.init(args.arch, args.precision[0])
     results = []
     for dx in args.dx:
+        load0 = load_average()
         r = bench_case(dx, args.steps, args.warmup, args.overrides)
         r["precision"] = be["precision"]
+        r["load_start_end"] = [load0, load_average()]
         print(f"{be['precision']}, dx {dx:g}: {r['fluid_particles']} fluid particles, {r['mipps']:.2f} M particle-steps/s "
               f"(fastest chunk {r['mipps_best_chunk']:.2f}, cpu/wall {r['cpu_over_wall']:.2f}), "
               f"{1e3 * r['seconds_per_step']:.2f} ms/step, {r['steps_per_rebuild']:.1f} steps per rebuild, "
@@ -143,6 +159,41 @@ def run_one(args) -> list:
               flush=True)
         results.append(r)
     return results
+
+
+def child(tree: Path, prec: str, args, path: Path) -> list:
+    """One precision, all spacings, with the code of checkout `tree` (its own copy of this tool)."""
+    cmd = [sys.executable, str(tree / "tools" / "bench_wcsph.py"), "--precision", prec, "--results-json", str(path),
+           "--arch", args.arch, "--steps", str(args.steps), "--warmup", str(args.warmup), "--dx", *map(str, args.dx)]
+    for o in args.overrides:
+        cmd += ["--set", o]
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    load0 = load_average()
+    subprocess.run(cmd, check=True, env=env)
+    out = json.loads(path.read_text())
+    for r in out:  # a tool without its own load record: that of the whole child run
+        r.setdefault("load_start_end", [load0, load_average()])
+    return out
+
+
+def comparison_markdown(rounds, against: str) -> str:
+    """Rounds of (this checkout, the other) run back to back: mean rates and their ratio per case."""
+    lines = ["", f"Interleaved with the code of `{against}` (the other checkout), round by round; M particle-steps/s",
+             "(mean over the timed steps), CPU s / wall s, and the 1-minute load average at start / end of each run.",
+             "", "| precision | dx | round | this: M p-steps/s | CPU/wall | load | other: M p-steps/s | CPU/wall | load "
+             "| this / other |", "|---|---|---|---|---|---|---|---|---|---|"]
+    ratios = {}
+    for k, (new, old) in enumerate(rounds):
+        for a, b in zip(new, old):
+            ratio = a["mipps"] / b["mipps"]
+            ratios.setdefault((a["precision"], a["dx"]), []).append(ratio)
+            la, lb = a["load_start_end"], b["load_start_end"]
+            lines.append(f"| {a['precision']} | {a['dx']:g} | {k + 1} | {a['mipps']:.2f} | {a['cpu_over_wall']:.2f} | "
+                         f"{la[0]:.1f} / {la[1]:.1f} | {b['mipps']:.2f} | {b['cpu_over_wall']:.2f} | "
+                         f"{lb[0]:.1f} / {lb[1]:.1f} | {ratio:.2f} |")
+    for (prec, dx), r in ratios.items():
+        lines.append(f"| {prec} | {dx:g} | median | | | | | | | {sorted(r)[len(r) // 2]:.2f} |")
+    return "\n".join(lines) + "\n"
 
 
 def main():
@@ -155,20 +206,26 @@ def main():
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", default=str(ROOT / "docs" / "performance_wcsph.md"))
     ap.add_argument("--results-json", help=argparse.SUPPRESS)
+    ap.add_argument("--against", help="another checkout to compare with, run alternately with this one")
+    ap.add_argument("--rounds", type=int, default=3, help="alternations with --against")
     args = ap.parse_args()
     if args.results_json:  # a child process: one precision
         Path(args.results_json).write_text(json.dumps(run_one(args)))
         return
     results = []
+    rounds = []
     with tempfile.TemporaryDirectory() as tmp:
-        for prec in args.precision:
-            path = Path(tmp) / f"{prec}.json"
-            cmd = [sys.executable, __file__, "--precision", prec, "--results-json", str(path), "--arch", args.arch,
-                   "--steps", str(args.steps), "--warmup", str(args.warmup), "--dx", *map(str, args.dx)]
-            for o in args.overrides:
-                cmd += ["--set", o]
-            subprocess.run(cmd, check=True)
-            results += json.loads(path.read_text())
+        if args.against:
+            for k in range(args.rounds):
+                new, old = [], []
+                for prec in args.precision:
+                    new += child(ROOT, prec, args, Path(tmp) / f"n{k}{prec}.json")
+                    old += child(Path(args.against).resolve(), prec, args, Path(tmp) / f"o{k}{prec}.json")
+                rounds.append((new, old))
+            results = rounds[-1][0]
+        else:
+            for prec in args.precision:
+                results += child(ROOT, prec, args, Path(tmp) / f"{prec}.json")
     import taichi as ti
 
     info = {"machine": machine(), "taichi": ".".join(map(str, ti.__version__)), "arch": args.arch,
@@ -176,8 +233,12 @@ def main():
             "date": time.strftime("%Y-%m-%d"), "warmup": args.warmup, "overrides": args.overrides}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps({"info": info, "results": results}, indent=2))
-    out.write_text(markdown(results, info))
+    info["against"] = args.against
+    out.with_suffix(".json").write_text(json.dumps({"info": info, "results": results, "rounds": rounds}, indent=2))
+    text = markdown(results, info)
+    if rounds:
+        text += comparison_markdown(rounds, args.against)
+    out.write_text(text)
     print(f"wrote {out}")
 
 
