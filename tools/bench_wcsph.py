@@ -98,6 +98,7 @@ def bench_case(dx: float, steps: int, warmup: int, overrides=(), until: float | 
         "particle_steps_per_second": solver.n_fluid * steps / wall, "mipps": solver.n_fluid * steps / wall / 1e6,
         "mipps_best_chunk": solver.n_fluid / best / 1e6,
         "cpu_over_wall": cpu / wall,
+        "cpu_seconds_per_step": cpu / steps,
         "steps_per_rebuild": steps / max(solver.rebuilds - rebuilds0, 1),
         "phase_seconds_per_step": {k: v / steps for k, v in solver.timers.items()},
         "setup_and_warmup_seconds": setup,
@@ -127,14 +128,14 @@ def markdown(results, info) -> str:
         "the start / end of the run (other processes on the machine).",
         "",
         "| precision | dx | fluid particles | all particles | M particle-steps/s (mean) | (fastest chunk) | "
-        "CPU s / wall s | load | ms/step | steps per list rebuild | "
+        "CPU s / wall s | CPU ms/step | load | ms/step | steps per list rebuild | "
         + " | ".join(phases) + " | setup+warm-up s |",
-        "|---|---|---|---|---|---|---|---|---|---|" + "---|" * len(phases) + "---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|" + "---|" * len(phases) + "---|",
     ]
     for r in results:
         ph = " | ".join(f"{1e3 * r['phase_seconds_per_step'][p]:.2f}" for p in phases)
         lines.append(f"| {r['precision']} | {r['dx']:g} | {r['fluid_particles']} | {r['all_particles']} | {r['mipps']:.2f} | "
-                     f"{r['mipps_best_chunk']:.2f} | {r['cpu_over_wall']:.2f} | "
+                     f"{r['mipps_best_chunk']:.2f} | {r['cpu_over_wall']:.2f} | {1e3 * cpu_per_step(r):.2f} | "
                      f"{r['load_start_end'][0]:.1f} / {r['load_start_end'][1]:.1f} | "
                      f"{1e3 * r['seconds_per_step']:.2f} | {r['steps_per_rebuild']:.1f} | {ph} | "
                      f"{r['setup_and_warmup_seconds']:.1f} |")
@@ -176,23 +177,32 @@ def child(tree: Path, prec: str, args, path: Path) -> list:
     return out
 
 
+def cpu_per_step(r: dict) -> float:
+    """CPU seconds per step of the timed loop (all threads; less sensitive to other processes than the
+    wall time: a thread waiting for a core costs no CPU time)."""
+    return r["cpu_over_wall"] * r["seconds_per_step"]
+
+
 def comparison_markdown(rounds, against: str) -> str:
-    """Rounds of (this checkout, the other) run back to back: mean rates and their ratio per case."""
-    lines = ["", f"Interleaved with the code of `{against}` (the other checkout), round by round; M particle-steps/s",
-             "(mean over the timed steps), CPU s / wall s, and the 1-minute load average at start / end of each run.",
-             "", "| precision | dx | round | this: M p-steps/s | CPU/wall | load | other: M p-steps/s | CPU/wall | load "
-             "| this / other |", "|---|---|---|---|---|---|---|---|---|---|"]
+    """Rounds of (this checkout, the other) run back to back: rates, CPU time per step and their ratios."""
+    lines = ["", f"Interleaved with the code of `{against}` (the other checkout), round by round: M particle-steps/s",
+             "(mean over the timed steps), CPU s / wall s, CPU ms per step (all threads), the 1-minute load average",
+             "at start / end of each run, and the ratios this / other of the rate and other / this of the CPU time.",
+             "", "| precision | dx | round | this: M p-steps/s | CPU/wall | CPU ms/step | load | other: M p-steps/s | "
+             "CPU/wall | CPU ms/step | load | rate ratio | CPU ratio |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     ratios = {}
     for k, (new, old) in enumerate(rounds):
         for a, b in zip(new, old):
-            ratio = a["mipps"] / b["mipps"]
-            ratios.setdefault((a["precision"], a["dx"]), []).append(ratio)
+            ratio, cratio = a["mipps"] / b["mipps"], cpu_per_step(b) / cpu_per_step(a)
+            ratios.setdefault((a["precision"], a["dx"]), []).append((ratio, cratio))
             la, lb = a["load_start_end"], b["load_start_end"]
             lines.append(f"| {a['precision']} | {a['dx']:g} | {k + 1} | {a['mipps']:.2f} | {a['cpu_over_wall']:.2f} | "
-                         f"{la[0]:.1f} / {la[1]:.1f} | {b['mipps']:.2f} | {b['cpu_over_wall']:.2f} | "
-                         f"{lb[0]:.1f} / {lb[1]:.1f} | {ratio:.2f} |")
+                         f"{1e3 * cpu_per_step(a):.2f} | {la[0]:.1f} / {la[1]:.1f} | {b['mipps']:.2f} | "
+                         f"{b['cpu_over_wall']:.2f} | {1e3 * cpu_per_step(b):.2f} | {lb[0]:.1f} / {lb[1]:.1f} | "
+                         f"{ratio:.2f} | {cratio:.2f} |")
     for (prec, dx), r in ratios.items():
-        lines.append(f"| {prec} | {dx:g} | median | | | | | | | {sorted(r)[len(r) // 2]:.2f} |")
+        med = [sorted(x)[len(x) // 2] for x in zip(*r)]
+        lines.append(f"| {prec} | {dx:g} | median | | | | | | | | | {med[0]:.2f} | {med[1]:.2f} |")
     return "\n".join(lines) + "\n"
 
 
