@@ -16,8 +16,8 @@ CPU seconds per wall second of the timed step loop (time.process_time against ti
 both cores of a 2-thread run busy) shows the serial parts and the interference of other processes.
 With --against, the same cases also run with the code of another checkout (this tool, with the
 `taichi_sph` package and configs of that checkout), alternating with this one `--rounds` times, so that
-both see the same machine load; the table then gains the per-round rates and their ratio, with the load average
-(os.getloadavg, 1 minute) at the start and end of each run.
+both see the same machine load; the table then gains the per-round rates and their ratio, with the load
+average (os.getloadavg, 1 minute) at the start and end of each run.
 """
 
 from __future__ import annotations
@@ -131,9 +131,10 @@ def markdown(results, info) -> str:
         "the fastest chunk is the rate with the least interference from other processes, and CPU seconds per",
         "wall second (2 = both cores busy with this run) shows how much of the machine the run had (the",
         "machine is shared; the 20k runs, with ~2 ms loops, suffer most). Load: the 1-minute load average at",
-        "the start / end of the run (other processes on the machine). CPU ms per step counts all threads; the",
-        "main thread's share is the serial part of the step loop (Python, kernel launches, reads of the",
-        "reductions, serial parts of kernels), while Taichi's worker threads run the parallel loops.",
+        "the start / end of the run (other processes on the machine). CPU ms per step counts all",
+        "threads; the main thread's share is the serial part of the step loop (Python, kernel launches,",
+        "reads of the reductions, serial parts of kernels), while Taichi's worker threads run the parallel",
+        "loops.",
         "",
         "| precision | dx | fluid particles | all particles | M particle-steps/s (mean) | (fastest chunk) | "
         "CPU s / wall s | CPU ms/step | main thread CPU ms/step | load | ms/step | steps per list rebuild | "
@@ -143,7 +144,8 @@ def markdown(results, info) -> str:
     for r in results:
         ph = " | ".join(f"{1e3 * r['phase_seconds_per_step'][p]:.2f}" for p in phases)
         lines.append(f"| {r['precision']} | {r['dx']:g} | {r['fluid_particles']} | {r['all_particles']} | {r['mipps']:.2f} | "
-                     f"{r['mipps_best_chunk']:.2f} | {r['cpu_over_wall']:.2f} | {1e3 * cpu_per_step(r):.2f} | "
+                     f"{r['mipps_best_chunk']:.2f} | {r['cpu_over_wall']:.2f} | "
+                     f"{1e3 * cpu_per_step(r):.2f} | "
                      f"{1e3 * r.get('main_thread_cpu_seconds_per_step', float('nan')):.2f} | "
                      f"{r['load_start_end'][0]:.1f} / {r['load_start_end'][1]:.1f} | "
                      f"{1e3 * r['seconds_per_step']:.2f} | {r['steps_per_rebuild']:.1f} | {ph} | "
@@ -178,7 +180,8 @@ def run_one(args) -> list:
 def child(tree: Path, prec: str, args, path: Path) -> list:
     """One precision, all spacings, in a process of its own with the code of checkout `tree`."""
     cmd = [sys.executable, __file__, "--precision", prec, "--results-json", str(path), "--code", str(tree),
-           "--arch", args.arch, "--steps", str(args.steps), "--warmup", str(args.warmup), "--dx", *map(str, args.dx)]
+           "--arch", args.arch, "--steps", str(args.steps), "--warmup", str(args.warmup),
+           "--dx", *map(str, args.dx)]
     for o in args.overrides:
         cmd += ["--set", o]
     subprocess.run(cmd, check=True, env=dict(os.environ, PYTHONPATH=str(tree)))
@@ -193,9 +196,10 @@ def cpu_per_step(r: dict) -> float:
 
 def comparison_markdown(rounds, against: str) -> str:
     """Rounds of (this checkout, the other) run back to back: rates, CPU time per step and their ratios."""
-    lines = ["", f"Interleaved with the code of `{against}` (the other checkout), round by round: M particle-steps/s",
-             "(mean over the timed steps), CPU s / wall s, CPU ms per step (all threads), the 1-minute load average",
-             "at start / end of each run, and the ratios this / other of the rate and other / this of the CPU time.",
+    lines = ["", f"Interleaved with the code of `{against}` (the other checkout), round by round:",
+             "M particle-steps/s (mean over the timed steps), CPU s / wall s, CPU ms per step (all threads),",
+             "the 1-minute load average at start / end of each run, and the ratios this / other of the rate",
+             "and other / this of the CPU time.",
              "Main: the main thread's CPU ms per step (the serial part).",
              "", "| precision | dx | round | this: M p-steps/s | CPU/wall | CPU ms/step | main | load | "
              "other: M p-steps/s | CPU/wall | CPU ms/step | main | load | rate ratio | CPU ratio |",
@@ -207,9 +211,10 @@ def comparison_markdown(rounds, against: str) -> str:
             ratios.setdefault((a["precision"], a["dx"]), []).append((ratio, cratio))
             la, lb = a["load_start_end"], b["load_start_end"]
             ma, mb = (1e3 * r.get("main_thread_cpu_seconds_per_step", float("nan")) for r in (a, b))
-            lines.append(f"| {a['precision']} | {a['dx']:g} | {k + 1} | {a['mipps']:.2f} | {a['cpu_over_wall']:.2f} | "
-                         f"{1e3 * cpu_per_step(a):.2f} | {ma:.2f} | {la[0]:.1f} / {la[1]:.1f} | {b['mipps']:.2f} | "
-                         f"{b['cpu_over_wall']:.2f} | {1e3 * cpu_per_step(b):.2f} | {mb:.2f} | {lb[0]:.1f} / {lb[1]:.1f} | "
+            lines.append(f"| {a['precision']} | {a['dx']:g} | {k + 1} | {a['mipps']:.2f} | "
+                         f"{a['cpu_over_wall']:.2f} | {1e3 * cpu_per_step(a):.2f} | {ma:.2f} | "
+                         f"{la[0]:.1f} / {la[1]:.1f} | {b['mipps']:.2f} | {b['cpu_over_wall']:.2f} | "
+                         f"{1e3 * cpu_per_step(b):.2f} | {mb:.2f} | {lb[0]:.1f} / {lb[1]:.1f} | "
                          f"{ratio:.2f} | {cratio:.2f} |")
     for (prec, dx), r in ratios.items():
         med = [sorted(x)[len(x) // 2] for x in zip(*r)]
@@ -256,7 +261,8 @@ def main():
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     info["against"] = args.against
-    out.with_suffix(".json").write_text(json.dumps({"info": info, "results": results, "rounds": rounds}, indent=2))
+    payload = {"info": info, "results": results, "rounds": rounds}
+    out.with_suffix(".json").write_text(json.dumps(payload, indent=2))
     text = markdown(results, info)
     if rounds:
         text += comparison_markdown(rounds, args.against)

@@ -27,11 +27,11 @@ dt = Delta t^n starts from the accelerations a^n of the previous step (or `initi
    number of 0.65 (docs/wcsph.md, "One step").
 
 The pair pass reads each neighbour from two packed vectors (s: x, v, rho^n, m, kind[, h]; q: rho~,
-p~ / rho~^2[, h~]): two contiguous loads per neighbour instead of eight. Physics a scene does not use is
-compiled out with ti.static flags (air, cohesion, artificial viscosity, XSPH, variable h, soil, moving
-walls, periodic axes; their values come from taichi_sph/switches.py). Soil (eq 35, 37-45) and the Biot drag
-(eq 46-47) join behind flags of their own: the soil's stress update in the loop of the pair pass, its
-forces and the drag in passes after it (soil_step.py, docs/biot.md).
+p~ / rho~^2[, h~]): two contiguous loads per neighbour and step (the two passes before took three). Physics
+a scene does not use is compiled out with ti.static flags (air, cohesion, artificial viscosity, XSPH,
+variable h, soil, moving walls, periodic axes; their values come from taichi_sph/switches.py). Soil (eq 35,
+37-45) and the Biot drag (eq 46-47) join behind flags of their own: the soil's stress update in the loop of
+the pair pass, its forces and the drag in passes after it (soil_step.py, docs/biot.md).
 """
 
 import logging
@@ -173,7 +173,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.v = vec(dim, float, n)  # leap-frog velocity v^{n+1/2}
         self.a = vec(dim, float, n)
         self.xs = vec(dim, float, n)  # XSPH correction eq 53
-        self.rate = vec(2, float, n)  # divergence D of eq 25 from the last two pair passes (D^{n-1/2}, D^{n-3/2})
+        self.rate = vec(2, float, n)  # divergence of eq 25, last two pair passes: D^{n-1/2}, D^{n-3/2}
         self.normal = vec(dim, float, n)
         self.x0 = vec(dim, float, n)  # positions at the last neighbour-list build
         self.rho = ti.field(float, n)
@@ -187,8 +187,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.ids = ti.field(ti.i32, n)
         self.active = ti.field(ti.i32, n)
         self.fmask = ti.field(ti.i32, n)
-        self.particle_fields = [self.x, self.v, self.a, self.xs, self.rate, self.normal, self.rho, self.p, self.h, self.m,
-                                self.wdepth, self.kind, self.ids, self.active]
+        self.particle_fields = [self.x, self.v, self.a, self.xs, self.rate, self.normal, self.rho, self.p,
+                                self.h, self.m, self.wdepth, self.kind, self.ids, self.active]
         self._soil_fields(n)
 
         init = initial_state(cfg, scene, self.materials)
@@ -755,8 +755,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
     state_fields = ("x", "v", "a", "xs", "rate", "normal", "x0", "rho", "p", "h", "m", "wdepth", "kind",
                     "ids", "active", "fmask", "s", "q", "sig", "eps_p", "pore", "phi_w", "adrag", "wall_body",
                     "wall_origin")
-    state_scalars = ("step_count", "time", "removed_total", "dt_prev", "dt_prev2", "rates_known", "r_list", "hmax",
-                     "rebuilds", "red", "red_s")
+    state_scalars = ("step_count", "time", "removed_total", "dt_prev", "dt_prev2", "rates_known", "r_list",
+                     "hmax", "rebuilds", "red", "red_s")
 
     def state(self) -> dict:
         """Full state for a checkpoint, {name: numpy array or scalar} (sph/state.py)."""
