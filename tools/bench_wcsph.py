@@ -194,9 +194,19 @@ def cpu_per_step(r: dict) -> float:
     return r["cpu_over_wall"] * r["seconds_per_step"]
 
 
+def describe_checkout(path: str) -> str:
+    """`commit <sha>` of a git checkout (its folder name when git cannot tell), for the tables."""
+    try:
+        sha = subprocess.run(["git", "-C", str(path), "rev-parse", "--short", "HEAD"], capture_output=True,
+                             text=True, check=True).stdout.strip()
+        return f"commit {sha}"
+    except (OSError, subprocess.CalledProcessError):
+        return Path(path).name
+
+
 def comparison_markdown(rounds, against: str) -> str:
     """Rounds of (this checkout, the other) run back to back: rates, CPU time per step and their ratios."""
-    lines = ["", f"Interleaved with the code of `{against}` (the other checkout), round by round:",
+    lines = ["", f"Interleaved with the code of {against} (the other checkout), round by round:",
              "M particle-steps/s (mean over the timed steps), CPU s / wall s, CPU ms per step (all threads),",
              "the 1-minute load average at start / end of each run, and the ratios this / other of the rate",
              "and other / this of the CPU time.",
@@ -260,12 +270,12 @@ def main():
             "date": time.strftime("%Y-%m-%d"), "warmup": args.warmup, "overrides": args.overrides}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    info["against"] = args.against
+    info["against"] = describe_checkout(args.against) if args.against else None
     payload = {"info": info, "results": results, "rounds": rounds}
     out.with_suffix(".json").write_text(json.dumps(payload, indent=2))
     text = markdown(results, info)
     if rounds:
-        text += comparison_markdown(rounds, args.against)
+        text += comparison_markdown(rounds, info["against"])
     out.write_text(text)
     print(f"wrote {out}")
 
