@@ -61,6 +61,9 @@ log = logging.getLogger("taichi_sph")
 H_MIN, H_MAX = 0.5, 1.1
 #: reductions returned by the force pass
 _NRED = 9
+#: largest timestep.cfl at which the one-pass step damps every acoustic mode: z = omega dt < 0.708 with the
+#: fastest lattice mode omega = c G_max, G_max dx = 0.901 (2D) / 0.923 (3D), dt = cfl 1.2 dx / c
+CFL_STABLE = 0.64
 #: scenes with fewer fluid particles run their loops serially: thread dispatch costs ~55 us per loop.
 #: Measured per step on 2 cores, serial / parallel: 500 particles 0.44 / 0.67 ms, 1200 0.77 / 0.91 ms,
 #: 2450 equal
@@ -108,6 +111,10 @@ class WCSPHSolver(SoilStep, SolverCommon):
         # ti.static switches: a scene compiles only what it uses (switches.py, also what `taichi-sph info
         # --config` reports)
         self.switches = sw = Switches.build(cfg, scene)
+        if cfg.timestep.cfl > CFL_STABLE:
+            log.warning("timestep.cfl = %g is above %g, where the one-pass step of mode wcsph_biot stops damping "
+                        "the acoustic modes (docs/wcsph.md, \"One step\"): expect them to grow", cfg.timestep.cfl,
+                        CFL_STABLE)
         self.n = n = scene.n
         #: period of each axis (0.0: not periodic), for operators.rel and operators.wrap
         self.period = scene.periods()
