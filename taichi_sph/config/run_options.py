@@ -100,7 +100,8 @@ class Probe(Strict):
 class TimeStep(Strict):
     """Limits used when dt = auto: dt = min(cfl dx / u_max, viscous dx^2 / nu, force sqrt(dx / |g|)).
     Mode wcsph_biot uses the same three coefficients in its eq 49: dt = min(cfl h / c,
-    force sqrt(h / |a|), viscous h^2 / nu) over all particles (h the smoothing length, c the sound speed)."""
+    force sqrt(h / |a|), viscous h^2 / nu) over all particles (h the smoothing length, c the sound speed);
+    its one-pass step is stable for cfl below 0.64 (docs/wcsph.md, "One step")."""
 
     cfl: PosFloat = 0.25
     viscous: PosFloat = 0.125

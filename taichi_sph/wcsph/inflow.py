@@ -141,7 +141,7 @@ def activate(solver, ids: np.ndarray) -> None:
     active = solver.active.to_numpy()
     active[sel] = 1
     solver.active.from_numpy(active)
-    for name, value in (("v", 0.0), ("a", 0.0), ("rho", solver.rho_w), ("p", 0.0)):
+    for name, value in (("v", 0.0), ("a", 0.0), ("rate", 0.0), ("rho", solver.rho_w), ("p", 0.0)):
         field = getattr(solver, name)
         arr = field.to_numpy()
         arr[sel] = value

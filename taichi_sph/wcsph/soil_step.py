@@ -1,20 +1,24 @@
 """Soil passes of mode wcsph_biot (seed 002 sections 2.3-2.5), mixed into WCSPHSolver.
 
 Soil particles (kind 2) are their own set overlapping the fluid sets (the seed's layers, fig 3); the
-fluid pair loops skip them. Per step, after the fluid density pass and force pass of solver.py:
+fluid pair terms skip them. Per step:
 
-1. stress pass (`_k_soil_stress`) at x^{n+1} with v^{n+1/2}: velocity gradient from soil neighbours and
-   walls (virtual velocity of eq 50-51), strain and spin rates (eq 37-38), density by eq 48, effective
-   stress by eq 42-45 (soil.py), pore pressure p_i = sum_w V_j p_j W_ij / sum_w V_j W_ij from the water
-   (eq 5, Shepard-normalised).
-2. force pass (`_k_soil_forces`): eq 35 with eq 36, gravity, the pore-pressure force -grad p / rho_s
-   (per unit soil mass, the (1 - n) grad p of the mixture theory over the soil's (1 - n) rho_s) and an
-   optional damping (`wcsph.soil.fixed`: the skeleton is rigid, its acceleration and drag are zero).
+1. stress update (`_soil_stress_at`), in the pair pass of solver.py at x^{n+1} with v^{n+1/2}: velocity
+   gradient from soil neighbours and walls (virtual velocity of eq 50-51), strain and spin rates
+   (eq 37-38), density by eq 48, effective stress by eq 42-45 (soil.py).
+2. force pass (`_k_soil_forces`), after the pair pass: first the pore pressure p_i = sum_w V_j p_j W_ij /
+   sum_w V_j W_ij from the water's new pressure (eq 5, Shepard-normalised) and the water presence
+   (`_soil_pore_at`), then eq 35 with eq 36, gravity, the pore-pressure force -grad p / rho_s (per unit
+   soil mass, the (1 - n) grad p of the mixture theory over the soil's (1 - n) rho_s) and an optional
+   damping (`wcsph.soil.fixed`: the skeleton is rigid, its acceleration and drag are zero).
 3. drag passes (`_k_drag_water`, `_k_drag_soil`, `_k_drag_water_after`): the water's mixture momentum
    inside the soil (pore part n under the water's forces, the rest moving with the soil) and eq 46-47
    between soil and water as pair forces F_ij = -F_ji (`_pair_drag`), implicit per pair (docs/biot.md),
    written to `adrag` which the next kick adds to the acceleration; their sum over all particles goes to
-   /diagnostics/drag_sum (momentum check), the largest to drag_max.
+   /diagnostics/drag_sum (momentum check), the largest to drag_max (summed in the last drag pass).
+
+Each pass reads of its neighbours only what the passes before it wrote: the force pass needs the new
+stresses of the soil around (step 1) and the water's new pressures; each drag pass needs the one before.
 """
 
 import logging
@@ -118,75 +122,91 @@ class SoilStep:
             self.adrag.fill(0.0)
 
     # ------------------------------------------------------------------ kernels
-    @ti.kernel
-    def _k_soil_stress(self, dt: float):
-        """Strain and spin rates (eq 37-38), density (eq 48), stress (eq 42-45), pore pressure (eq 5)."""
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.fmask[i] == 2:
-                si = self.s[i]
-                xi = self._pos(si)
-                vi = self._vel(si)
-                rhoi = si[self.S_RHO]
-                h = self.h0
-                L = ti.Matrix.zero(float, self.dim, self.dim)
-                pn = 0.0
-                pd = 0.0
-                pdw = 0.0
-                for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
-                    sj = self.s[j]
-                    rij = operators.rel(xi, self._pos(sj), self.period)
-                    r2 = rij.dot(rij)
-                    if r2 >= 4.0 * h * h:
-                        continue
-                    kj = sj[self.S_KIND]
-                    if kj == WATER:
-                        if ti.static(self.coupled):
-                            wij = kernels.w(ti.sqrt(r2), h, self.dim)
-                            vj = sj[self.S_M] / self.rho[j]
-                            pn += vj * self.p[j] * wij
-                            pd += vj * wij
-                        continue
-                    if ti.static(self.coupled):  # noqa: SIM102 (compile-time if)
-                        if kj == WALL:
-                            pdw += self.vol0 * kernels.w(ti.sqrt(r2), h, self.dim)
-                    if r2 == 0.0:
-                        continue
-                    r = ti.sqrt(r2)
-                    gw = kernels.dw_dr(r, h, self.dim) / r * rij
-                    if kj == SOIL:
-                        L += sj[self.S_M] / sj[self.S_RHO] * (self._vel(sj) - vi).outer_product(gw)
-                    elif kj == WALL:
-                        db = self.wdepth[j]
-                        nrm = self.normal[j]
-                        beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
-                        vij = terms.boundary_relative_velocity(vi - self.v[j], nrm, beta, self.no_slip)
-                        L -= self.vol0 * vij.outer_product(gw)
-                rho = rhoi * (1.0 - L.trace() * dt)
-                # dt = 0 (the interpolation pass of initial_diagnostics) leaves the stress as it is: the return
-                # mapping would otherwise re-project a stress lying on the yield surface and move it by rounding
-                if dt > 0.0:
-                    sig, dgam, _e = soil.stress_update(self.sig[i], L, dt, self.e0, self.p_ref, self.m_exp,
-                                                       self.p_floor, self.nu_s, self.k_fac, self.sin_phi, self.c_cos,
-                                                       self.t_cut, self.dim, self.sin_psi, self.dilatant)
-                    self.sig[i] = sig
-                    self.eps_p[i] += dgam
-                self.rho[i] = rho
-                self.q[i][self.Q_RHO] = rho
-                pore = 0.0
-                if pd > 0.0:
-                    pore = pn / pd
-                self.pore[i] = pore
-                self.p[i] = pore
-                # wetness: the water's share of the support not taken by walls (1 in saturated soil
-                # beside a wall, whose wall particles take part of the kernel support)
-                self.phi_w[i] = ti.min(pd / ti.max(1.0 - pdw, 0.5), 1.0)
+    @ti.func
+    def _soil_stress_at(self, i, dt):
+        """Soil particle i in the pair pass of solver.py: strain and spin rates (eq 37-38), density (eq 48),
+        stress (eq 42-45). Reads the packed view s of its soil and wall neighbours only (the water's
+        pressure of this step is not known yet: `_k_soil_pore` interpolates it after the pass)."""
+        si = self.s[i]
+        xi = self._pos(si)
+        vi = self._vel(si)
+        rhoi = si[self.S_RHO]
+        h = self.h0
+        L = ti.Matrix.zero(float, self.dim, self.dim)
+        for k in range(self.grid.nbr_count[i]):
+            j = self.grid.nbr[i, k]
+            sj = self.s[j]
+            kj = sj[self.S_KIND]
+            if kj != SOIL and kj != WALL:
+                continue
+            rij = operators.rel(xi, self._pos(sj), self.period)
+            r2 = rij.dot(rij)
+            if r2 >= 4.0 * h * h or r2 == 0.0:
+                continue
+            r = ti.sqrt(r2)
+            gw = kernels.dw_dr(r, h, self.dim) / r * rij
+            if kj == SOIL:
+                L += sj[self.S_M] / sj[self.S_RHO] * (self._vel(sj) - vi).outer_product(gw)
+            else:
+                db = self.wdepth[j]
+                nrm = self.normal[j]
+                beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
+                vij = terms.boundary_relative_velocity(vi - self.v[j], nrm, beta, self.no_slip)
+                L -= self.vol0 * vij.outer_product(gw)
+        # dt = 0 (the pass of initial_diagnostics) leaves the stress as it is: the return mapping would
+        # otherwise re-project a stress lying on the yield surface and move it by rounding
+        if dt > 0.0:
+            sig, dgam, _e = soil.stress_update(self.sig[i], L, dt, self.e0, self.p_ref, self.m_exp,
+                                               self.p_floor, self.nu_s, self.k_fac, self.sin_phi, self.c_cos,
+                                               self.t_cut, self.dim, self.sin_psi, self.dilatant)
+            self.sig[i] = sig
+            self.eps_p[i] += dgam
+        self.rho[i] = rhoi * (1.0 - L.trace() * dt)
+        if ti.static(not self.coupled):
+            self.pore[i] = 0.0
+            self.p[i] = 0.0
+            self.phi_w[i] = 0.0
+
+    @ti.func
+    def _soil_pore_at(self, i):
+        """Pore pressure at soil particle i from the water's pressure of this step, p_i = sum_w V_j p_j W_ij /
+        sum_w V_j W_ij (eq 5, Shepard-normalised), and the water presence phi_w; the first of two walks over
+        i's neighbours in `_k_soil_forces` (only i's own values are read there)."""
+        h = self.h0
+        xi = self.x[i]
+        pn = 0.0
+        pd = 0.0
+        pdw = 0.0
+        for k in range(self.grid.nbr_count[i]):
+            j = self.grid.nbr[i, k]
+            kj = self.kind[j]
+            if kj != WATER and kj != WALL:
+                continue
+            rij = operators.rel(xi, self.x[j], self.period)
+            r2 = rij.dot(rij)
+            if r2 >= 4.0 * h * h:
+                continue
+            wij = kernels.w(ti.sqrt(r2), h, self.dim)
+            if kj == WATER:
+                vj = self.m[j] / self.rho[j]
+                pn += vj * self.p[j] * wij
+                pd += vj * wij
+            else:
+                pdw += self.vol0 * wij
+        pore = 0.0
+        if pd > 0.0:
+            pore = pn / pd
+        self.pore[i] = pore
+        self.p[i] = pore
+        # wetness: the water's share of the support not taken by walls (1 in saturated soil beside a wall,
+        # whose wall particles take part of the kernel support)
+        self.phi_w[i] = ti.min(pd / ti.max(1.0 - pdw, 0.5), 1.0)
 
     @ti.kernel
     def _k_soil_forces(self, dt: float):
-        """Eq 35 with eq 36, gravity, pore-pressure force, damping; reductions: kinetic energy, max speed,
-        min h/|a|, min h/c, non-finite count, first bad id."""
+        """Pore pressure and water presence (`_soil_pore_at`), then eq 35 with eq 36, gravity, pore-pressure
+        force, damping; reductions: kinetic energy, max speed, min h/|a|, min h/c, non-finite count, first
+        bad id."""
         ke = 0.0
         vmax = 0.0
         h_over_a = 1.0e30
@@ -197,6 +217,8 @@ class SoilStep:
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.fmask[i] == 2:
+                if ti.static(self.coupled):
+                    self._soil_pore_at(i)
                 si = self.s[i]
                 xi = self._pos(si)
                 vi = self._vel(si)
@@ -405,10 +427,18 @@ class SoilStep:
     @ti.kernel
     def _k_drag_water_after(self, dt: float):
         """Water side of the Biot drag: the pair forces F_ij of `_pair_drag` over the soil around, and the
-        share (1 - n_i) that moves with the soil takes the soil's mean drag acceleration (docs/biot.md)."""
+        share (1 - n_i) that moves with the soil takes the soil's mean drag acceleration (docs/biot.md).
+        Also the momentum check: the sum over all particles of the drag forces `fdrag` (the soil's from
+        `_k_drag_soil`) and the largest of them, into `red_drag`."""
         h = self.h0
+        tot = ti.Vector.zero(float, self.dim)
+        big = 0.0
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
+            if self.fmask[i] == 2:
+                f = self.fdrag[i]
+                tot += f
+                ti.atomic_max(big, f.norm())
             if self.fmask[i] == 1 and self.kind[i] == WATER:
                 fsum = ti.Vector.zero(float, self.dim)
                 wsum = 0.0
@@ -429,17 +459,8 @@ class SoilStep:
                     ad += (1.0 - self.wmix[i][0]) * dbar / wsum
                 self.fdrag[i] = fsum
                 self.adrag[i] = ad
-
-    @ti.kernel
-    def _k_drag_momentum(self):
-        """Sum over all particles of the drag forces of eq 46-47 (`fdrag`) and the largest of them."""
-        tot = ti.Vector.zero(float, self.dim)
-        big = 0.0
-        for i in range(self.n):
-            if self.fmask[i] == 2 or (self.fmask[i] == 1 and self.kind[i] == WATER):
-                f = self.fdrag[i]
-                tot += f
-                ti.atomic_max(big, f.norm())
+                tot += fsum
+                ti.atomic_max(big, fsum.norm())
         out = ti.Vector.zero(float, self.dim + 1)
         for d in ti.static(range(self.dim)):
             out[d] = tot[d]
@@ -447,9 +468,6 @@ class SoilStep:
         self.red_drag[None] = out
 
     # ------------------------------------------------------------------ host side
-    def _soil_stress(self, dt: float):
-        self._k_soil_stress(dt)
-
     def _soil_forces(self, dt: float):
         self._k_soil_forces(dt)
         r = self.red_soil[None].to_numpy()
@@ -460,11 +478,9 @@ class SoilStep:
         self.last["kinetic_energy"] += float(r[0])
         self.last["max_speed"] = max(self.last["max_speed"], float(r[1]))
         if self.coupled:
-            self.fdrag.fill(0.0)
             self._k_drag_water(dt)
             self._k_drag_soil(dt)
             self._k_drag_water_after(dt)
-            self._k_drag_momentum()
             r = self.red_drag[None].to_numpy()
             self.last["drag_sum"] = float(np.linalg.norm(r[:-1]))
             self.last["drag_max"] = float(r[-1])

@@ -7,25 +7,31 @@ boundary particles with the Morris/Takeda virtual velocity (eq 50-51). One step 
 dt = Delta t^n starts from the accelerations a^n of the previous step (or `initial_diagnostics`):
 
 1. kick-drift (leap-frog, eq 48): v^{n+1/2} = v^{n-1/2} + (Delta t^{n-1} + Delta t^n) / 2 a^n,
-   x^{n+1} = x^n + Delta t (v^{n+1/2} + XSPH correction of eq 53).
+   x^{n+1} = x^n + Delta t (v^{n+1/2} + XSPH correction of eq 53); the packed views of the pair pass,
+   with each fluid particle's density predicted to the end of the step, rho~ = rho^n (1 - D~ Delta t),
+   D~ the divergence of eq 25 extrapolated along the line through the last two pair passes, and its
+   pressure from the equations of state (eq 39-41).
 2. neighbour lists, rebuilt only when some particle has moved far enough to need it (Verlet skin).
-3. density pass at x^{n+1} with v^{n+1/2}: divergence D_i (eq 25 in volume form), rho^{n+1} =
-   rho^n (1 - D_i Delta t) (eq 48), h^{n+1} = h^n (1 + D_i Delta t / d) (eq 52), the XSPH correction,
-   every `normalise_every` steps eq 27 (normalised density over the same material) applied first;
-   pressure from the equations of state (eq 39-41). Advancing the density with the velocity that
-   moved the particles keeps the (density, velocity) pair symplectic; rates from the previous force
-   pass (one pass per step) make the acoustic modes grow like forward Euler and blow up a tank at rest.
-4. force pass: eq 34 (pressure, Morris viscosity), eq 36 (artificial viscosity), eq 54 (cohesion),
-   gravity; a wall particle seen from fluid particle i has the velocity of eq 50-51, the density of i
-   and the pressure of i extrapolated hydrostatically, p_i + rho_i g . (x_w - x_i); the reductions
-   eq 49 and the diagnostics need, returned as one small vector (the
-   only transfer to the host per step besides the list-rebuild test).
+3. every `normalise_every` steps eq 27 (normalised density over the same material), its own pass.
+4. pair pass at x^{n+1} with v^{n+1/2}, one walk over the neighbours of each fluid particle for both:
+   the divergence D_i (eq 25 in volume form), rho^{n+1} = rho^n (1 - D_i Delta t) (eq 48),
+   h^{n+1} = h^n (1 + D_i Delta t / d) (eq 52), the XSPH correction; and the accelerations a^{n+1} from
+   rho~, p~: eq 34 (pressure, Morris viscosity), eq 36 (artificial viscosity), eq 54 (cohesion), gravity;
+   a wall particle seen from fluid particle i has the velocity of eq 50-51, the density of i and the
+   pressure of i extrapolated hydrostatically; the reductions eq 49 and the diagnostics need, returned
+   as one small vector (the only transfer to the host per step besides the list-rebuild test).
+   The density the forces see differs from rho^{n+1} by order Delta t^3 d^3 rho / dt^3: the exact
+   pair of passes (density, then forces with rho^{n+1}) needs every neighbour's new density before any
+   force. With the previous pass's rate alone (rho~ = rho^n at D~ = 0, or D~ = D^{n-1/2}) the acoustic
+   modes grow; with the line through the last two they decay slightly and stay stable up to a Courant
+   number of 0.65 (docs/wcsph.md, "One step").
 
-The two pair loops read each neighbour from one packed vector (x, v, rho, p / rho^2, m, kind[, h]): one
-contiguous load per neighbour instead of six. Physics a scene does not use is compiled out with
-ti.static flags (air, cohesion, artificial viscosity, XSPH, variable h, soil, moving walls, periodic
-axes; their values come from taichi_sph/switches.py). Soil (eq 35, 37-45) and the Biot drag (eq 46-47)
-join as a further kind in the same pair loops behind flags of their own (soil_step.py, docs/biot.md).
+The pair pass reads each neighbour from two packed vectors (s: x, v, rho^n, m, kind[, h]; q: rho~,
+p~ / rho~^2[, h~]): two contiguous loads per neighbour and step (the two passes before took three). Physics
+a scene does not use is compiled out with ti.static flags (air, cohesion, artificial viscosity, XSPH,
+variable h, soil, moving walls, periodic axes; their values come from taichi_sph/switches.py). Soil (eq 35,
+37-45) and the Biot drag (eq 46-47) join behind flags of their own: the soil's stress update in the loop of
+the pair pass, its forces and the drag in passes after it (soil_step.py, docs/biot.md).
 """
 
 import logging
@@ -55,6 +61,9 @@ log = logging.getLogger("taichi_sph")
 H_MIN, H_MAX = 0.5, 1.1
 #: reductions returned by the force pass
 _NRED = 9
+#: largest timestep.cfl at which the one-pass step damps every acoustic mode: z = omega dt < 0.708 with the
+#: fastest lattice mode omega = c G_max, G_max dx = 0.901 (2D) / 0.923 (3D), dt = cfl 1.2 dx / c
+CFL_STABLE = 0.64
 #: scenes with fewer fluid particles run their loops serially: thread dispatch costs ~55 us per loop.
 #: Measured per step on 2 cores, serial / parallel: 500 particles 0.44 / 0.67 ms, 1200 0.77 / 0.91 ms,
 #: 2450 equal
@@ -102,6 +111,10 @@ class WCSPHSolver(SoilStep, SolverCommon):
         # ti.static switches: a scene compiles only what it uses (switches.py, also what `taichi-sph info
         # --config` reports)
         self.switches = sw = Switches.build(cfg, scene)
+        if cfg.timestep.cfl > CFL_STABLE:
+            log.warning("timestep.cfl = %g is above %g, where the one-pass step of mode wcsph_biot stops damping "
+                        "the acoustic modes (docs/wcsph.md, \"One step\"): expect them to grow", cfg.timestep.cfl,
+                        CFL_STABLE)
         self.n = n = scene.n
         #: period of each axis (0.0: not periodic), for operators.rel and operators.wrap
         self.period = scene.periods()
@@ -142,9 +155,9 @@ class WCSPHSolver(SoilStep, SolverCommon):
         if self.has_soil and cfg.neighbours.max is None:  # soil overlaps the fluid: twice the neighbours
             self.max_nb *= 2
 
-        # packed neighbour views. s: x (dim), v (dim), rho, m, kind[, h] at the start of a step (read by the
-        # density pass); q: rho, p / rho^2[, h] after the density pass (read by the force pass). Each
-        # pass writes only fields that no particle reads in that pass, so every step is three loops.
+        # packed neighbour views, written by the kick-drift. s: x (dim), v (dim), rho^n, m, kind[, h^n];
+        # q: the predicted rho~, p~ / rho~^2[, h~] the pair pass takes its forces from. Each pass writes
+        # only fields that no particle reads in that pass, so every step is two loops.
         self.S_V = dim
         self.S_RHO = 2 * dim
         self.S_M = 2 * dim + 1
@@ -167,6 +180,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.v = vec(dim, float, n)  # leap-frog velocity v^{n+1/2}
         self.a = vec(dim, float, n)
         self.xs = vec(dim, float, n)  # XSPH correction eq 53
+        self.rate = vec(2, float, n)  # divergence of eq 25, last two pair passes: D^{n-1/2}, D^{n-3/2}
         self.normal = vec(dim, float, n)
         self.x0 = vec(dim, float, n)  # positions at the last neighbour-list build
         self.rho = ti.field(float, n)
@@ -180,8 +194,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.ids = ti.field(ti.i32, n)
         self.active = ti.field(ti.i32, n)
         self.fmask = ti.field(ti.i32, n)
-        self.particle_fields = [self.x, self.v, self.a, self.xs, self.normal, self.rho, self.p, self.h, self.m,
-                                self.wdepth, self.kind, self.ids, self.active]
+        self.particle_fields = [self.x, self.v, self.a, self.xs, self.rate, self.normal, self.rho, self.p,
+                                self.h, self.m, self.wdepth, self.kind, self.ids, self.active]
         self._soil_fields(n)
 
         init = initial_state(cfg, scene, self.materials)
@@ -208,6 +222,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.h.fill(self.h0)
         self.a.fill(0.0)
         self.xs.fill(0.0)
+        self.rate.fill(0.0)
         # obstacles with a prescribed motion (sph/wall_motion.py), moved by the kick-drift; their wall
         # particles' v is the wall velocity of eq 50-51
         self.motion = WallMotion(scene, dim, self.period, f)
@@ -226,10 +241,12 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.hmax = self.h0
         self.rebuilds = 0
         self.dt_prev = 0.0
+        self.dt_prev2 = 0.0
+        self.rates_known = 0  # pair passes behind the divergences in `rate` (at most 2)
         self.removed_total = 0
         self.step_count = 0
         self.time = 0.0
-        self.timers = {k: 0.0 for k in ("update", "neighbours", "density", "forces")}
+        self.timers = {k: 0.0 for k in ("update", "neighbours", "pairs", "soil")}
         self.red = np.zeros(_NRED)
         self.last = {}
 
@@ -294,18 +311,36 @@ class WCSPHSolver(SoilStep, SolverCommon):
         return hij
 
     @ti.func
-    def _pack(self, i):
+    def _pack_s(self, i):
+        """View s of particle i: x^{n+1}, v^{n+1/2}, rho^n, m, kind[, h^n]."""
         for d in ti.static(range(self.dim)):
             self.s[i][d] = self.x[i][d]
             self.s[i][self.S_V + d] = self.v[i][d]
         self.s[i][self.S_RHO] = self.rho[i]
         self.s[i][self.S_M] = self.m[i]
         self.s[i][self.S_KIND] = ti.cast(self.kind[i], float)
-        self.q[i][self.Q_RHO] = self.rho[i]
-        self.q[i][self.Q_PR] = self.p[i] / (self.rho[i] * self.rho[i])
         if ti.static(self.variable_h):
             self.s[i][self.S_H] = self.h[i]
-            self.q[i][self.Q_H] = self.h[i]
+
+    @ti.func
+    def _pack_q(self, i, dt, w1, w2):
+        """View q of particle i: the state the pair pass takes its pressures from. For a fluid particle the
+        density predicted to the end of the step, rho~ = rho^n (1 - D~ dt) with the divergence extrapolated
+        from the last two pair passes, D~ = w1 D^{n-1/2} + w2 D^{n-3/2} (docs/wcsph.md, "One step"), its
+        pressure p~ / rho~^2 by the equations of state and h~ by eq 52; rho^n and p^n with dt = 0."""
+        rho = self.rho[i]
+        pr = self.p[i] / (rho * rho)
+        h = self.h[i]
+        if self.fmask[i] == 1 and dt > 0.0:
+            dd = (w1 * self.rate[i][0] + w2 * self.rate[i][1]) * dt
+            rho = rho * (1.0 - dd)
+            pr = self._eos_pressure(self.kind[i], rho) / (rho * rho)
+            if ti.static(self.variable_h):
+                h = ti.min(ti.max(h * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
+        self.q[i][self.Q_RHO] = rho
+        self.q[i][self.Q_PR] = pr
+        if ti.static(self.variable_h):
+            self.q[i][self.Q_H] = h
 
     # ------------------------------------------------------------------ kernels
     @ti.kernel
@@ -318,18 +353,19 @@ class WCSPHSolver(SoilStep, SolverCommon):
                     self.fmask[i] = 2  # soil: moved by kick-drift, its own passes (soil_step.py)
 
     @ti.kernel
-    def _k_after_build(self):
+    def _k_after_build(self, dt: float, w1: float, w2: float):
         """After a list build: positions at build time and the packed views."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             self.x0[i] = self.x[i]
-            self._pack(i)
+            self._pack_s(i)
+            self._pack_q(i, dt, w1, w2)
 
     @ti.kernel
-    def _k_kick_drift(self, dt: float, dt_prev: float):
-        """Leap-frog (eq 48): kick with a^n, drift with v^{n+1/2} plus the XSPH correction (eq 53); the
-        density and h of the last density pass become the start values of this one. Returns the largest
-        squared displacement since the last list build and the largest h."""
+    def _k_kick_drift(self, dt: float, dt_prev: float, w1: float, w2: float):
+        """Leap-frog (eq 48): kick with a^n, drift with v^{n+1/2} plus the XSPH correction (eq 53); then the
+        packed views of the pair pass (`_pack_s`, `_pack_q`). Returns the largest squared displacement
+        since the last list build and the largest h the pair pass will use."""
         d2max = 0.0
         hmax = 0.0
         ti.loop_config(serialize=self.serial)
@@ -346,16 +382,12 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 if ti.static(self.periodic):
                     xn = operators.wrap(xn, self.period)
                 self.x[i] = xn
-                for d in ti.static(range(self.dim)):
-                    self.s[i][d] = xn[d]
-                    self.s[i][self.S_V + d] = vh[d]
-                self.s[i][self.S_RHO] = self.q[i][self.Q_RHO]
+                self._pack_s(i)
+                self._pack_q(i, dt, w1, w2)
                 dd = operators.rel(xn, self.x0[i], self.period)
                 ti.atomic_max(d2max, dd.dot(dd))
                 if ti.static(self.variable_h):
-                    hi = self.q[i][self.Q_H]
-                    self.s[i][self.S_H] = hi
-                    ti.atomic_max(hmax, hi)
+                    ti.atomic_max(hmax, self.q[i][self.Q_H])
             if ti.static(self.moving):  # noqa: SIM102 (compile-time if)
                 if self.wall_body[i] >= 0:  # a moving obstacle's wall particle: its velocity over this step
                     vb = self.motion.vel[self.wall_body[i]]
@@ -370,94 +402,51 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.red_kick[None] = ti.Vector([d2max, hmax])
 
     @ti.kernel
-    def _k_density(self, dt: float, normalise: ti.template()):
-        """Density pass at x^{n+1} with v^{n+1/2}: divergence D_i = sum_j V_j (v_j - v_i) . grad_i W_ij
-        (eq 25 in volume form; walls with the virtual velocity of eq 50-51), rho^{n+1} = rho^n (1 - D_i dt)
-        (eq 48), h^{n+1} = h^n (1 + D_i dt / d) (eq 52), the XSPH correction (eq 53) and, when `normalise`,
-        eq 27 applied to rho^n first: rho_i = sum_{j in a} m_j W_ij / sum_{j in a} (m_j / rho_j) W_ij over
-        the material a of i (self included) and the wall particles, each standing for i's material at
-        rho_w = rho_i (1 + g . d_n / c_i^2) (hydrostatic across the wall, d_n the normal part of x_w - x_i,
-        volume dx^d). Then the equations of state (eq 39-41). Reads the view s, writes the view q and the
-        particle's own fields."""
+    def _k_normalise(self, dt: float, w1: float, w2: float):
+        """Eq 27 every `normalise_every` steps, before the pair pass: rho_i^n = sum_{j in a} m_j W_ij /
+        sum_{j in a} (m_j / rho_j) W_ij over the material a of i (self included) and the wall particles,
+        each standing for i's material at rho_w = rho_i (1 + g . d_n / c_i^2) (hydrostatic across the wall,
+        d_n the normal part of x_w - x_i, volume dx^d). Reads the view s, writes rho^n and the view q."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.fmask[i] == 1:
                 si = self.s[i]
                 xi = self._pos(si)
-                vi = self._vel(si)
                 ki = si[self.S_KIND]
                 rhoi = si[self.S_RHO]
                 hi = self.h0
                 if ti.static(self.variable_h):
                     hi = si[self.S_H]
-                num = 0.0
-                den = 0.0
-                c2i = 0.0
-                if ti.static(normalise):
-                    w0 = kernels.w(0.0, hi, self.dim)
-                    num = si[self.S_M] * w0
-                    den = si[self.S_M] / rhoi * w0
-                    c2i = self._sound_speed(ki, rhoi) ** 2
-                div = 0.0
-                xs = ti.Vector.zero(float, self.dim)
+                w0 = kernels.w(0.0, hi, self.dim)
+                num = si[self.S_M] * w0
+                den = si[self.S_M] / rhoi * w0
+                c2i = self._sound_speed(ki, rhoi) ** 2
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
-                    if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if); soil couples by drag only
-                        if sj[self.S_KIND] == SOIL:
-                            continue
+                    kj = sj[self.S_KIND]
+                    same = kj == ki
+                    if kj != WALL and not same:
+                        continue
                     hij = self._h_pair(hi, sj)
                     rij = operators.rel(xi, self._pos(sj), self.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * hij * hij or r2 == 0.0:
                         continue
-                    r = ti.sqrt(r2)
-                    wij, dwdr = kernels.w_and_dw_dr(r, hij, self.dim)
-                    gw = dwdr / r * rij
-                    kj = sj[self.S_KIND]
+                    wij = kernels.w(ti.sqrt(r2), hij, self.dim)
                     if kj == WALL:
-                        db = self.wdepth[j]
+                        # the wall's mirror image of i's material, hydrostatic across the wall: without it
+                        # eq 27 averages the row next to a floor with the rows above only (lighter)
                         nrm = self.normal[j]
-                        beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
-                        vij = terms.boundary_relative_velocity(vi - self._vel(sj), nrm, beta, self.no_slip)
-                        div -= self.vol0 * vij.dot(gw)
-                        if ti.static(normalise):
-                            # the wall's mirror image of i's material, hydrostatic across the wall: without
-                            # it eq 27 averages the row next to a floor with the rows above only (lighter)
-                            dxn = (-rij).dot(nrm) * nrm
-                            rho_w = rhoi * (1.0 + self.g.dot(dxn) / c2i)
-                            num += rho_w * self.vol0 * wij
-                            den += self.vol0 * wij
+                        dxn = (-rij).dot(nrm) * nrm
+                        num += rhoi * (1.0 + self.g.dot(dxn) / c2i) * self.vol0 * wij
+                        den += self.vol0 * wij
                     else:
-                        vij = vi - self._vel(sj)
                         mj = sj[self.S_M]
-                        rhoj = sj[self.S_RHO]
-                        div -= mj / rhoj * vij.dot(gw)
-                        same = True
-                        if ti.static(self.has_air):
-                            same = kj == ki
-                        if ti.static(self.xsph_on or normalise):
-                            if ti.static(self.xsph_on):
-                                xs += terms.xsph(mj, rhoi, rhoj, vij, wij)
-                            if ti.static(normalise):  # noqa: SIM102 (compile-time if)
-                                if same:
-                                    num += mj * wij
-                                    den += mj / rhoj * wij
-                if ti.static(normalise):
-                    rhoi = num / den
-                dd = div * dt
-                rho = rhoi * (1.0 - dd)
-                p = self._eos_pressure(self.kind[i], rho)
-                self.rho[i] = rho
-                self.p[i] = p
-                self.q[i][self.Q_RHO] = rho
-                self.q[i][self.Q_PR] = p / (rho * rho)
-                if ti.static(self.xsph_on):
-                    self.xs[i] = self.xsph_eps * xs
-                if ti.static(self.variable_h):
-                    hn = ti.min(ti.max(hi * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
-                    self.h[i] = hn
-                    self.q[i][self.Q_H] = hn
+                        num += mj * wij
+                        den += mj / sj[self.S_RHO] * wij
+                self.rho[i] = num / den
+                self._pack_q(i, dt, w1, w2)
 
     @ti.kernel
     def _k_wall_pressure(self):
@@ -493,10 +482,17 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 self.p[i] = pw
 
     @ti.kernel
-    def _k_forces(self, dt: float):
-        """Accelerations at x^{n+1}, rho^{n+1}: eq 34 (pressure; Morris viscosity with v^{n+1/2}), eq 36,
-        eq 54 and gravity; reductions: kinetic energy, max speed, water volume, min h/|a|, min h/c,
-        non-finite count, first bad id, min h, air volume."""
+    def _k_pairs(self, dt: float):
+        """The pair pass at x^{n+1} with v^{n+1/2}, one walk over each fluid particle's neighbours for:
+        - continuity: D_i = sum_j V_j (v_j - v_i) . grad_i W_ij (eq 25 in volume form, V_j = m_j / rho_j^n;
+          walls with the virtual velocity of eq 50-51), rho^{n+1} = rho^n (1 - D_i dt) (eq 48),
+          h^{n+1} = h^n (1 + D_i dt / d) (eq 52), the XSPH correction (eq 53), then the equations of state
+          (eq 39-41); D_i is kept for the next two predictions of `_pack_q`;
+        - forces with the predicted rho~, p~ of the view q: eq 34 (pressure; Morris viscosity with
+          v^{n+1/2}), eq 36, eq 54 and gravity.
+        Soil particles take their stress update in the same loop (soil_step.py). Reductions: kinetic energy,
+        max speed, water volume, min h/|a|, min h/c, non-finite count, first bad id, min h, air volume.
+        With dt = 0 (initial_diagnostics) the density, pressure, h and XSPH correction stay as they are."""
         ke = 0.0
         vmax = 0.0
         vol = 0.0
@@ -513,12 +509,12 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 qi = self.q[i]
                 xi = self._pos(si)
                 vi = self._vel(si)
+                rho_n = self.rho[i]
                 rhoi = qi[self.Q_RHO]
                 pri = qi[self.Q_PR]
                 pi = pri * rhoi * rhoi
                 mi = si[self.S_M]
                 ki = self.kind[i]
-                voli = mi / rhoi
                 hi = self.h0
                 if ti.static(self.variable_h):
                     hi = qi[self.Q_H]
@@ -526,6 +522,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 c0i = self._c0(ki)
                 cohi = self._cohesion(ki)
                 acc = self.g
+                div = 0.0
+                xs = ti.Vector.zero(float, self.dim)
                 # pressure acceleration, and the share of it the walls take through the gradient at i
                 accp = ti.Vector.zero(float, self.dim)
                 m_wall = ti.Matrix.zero(float, self.dim, self.dim)
@@ -533,10 +531,10 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 for k in range(self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
-                    qj = self.q[j]
-                    if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if)
+                    if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if); soil couples by drag only
                         if sj[self.S_KIND] == SOIL:
                             continue
+                    qj = self.q[j]
                     hij = self.h0
                     if ti.static(self.variable_h):
                         hij = 0.5 * (hi + qj[self.Q_H])
@@ -545,11 +543,15 @@ class WCSPHSolver(SoilStep, SolverCommon):
                     if r2 >= 4.0 * hij * hij or r2 == 0.0:
                         continue
                     r = ti.sqrt(r2)
-                    dwdr = kernels.dw_dr(r, hij, self.dim)
+                    wij = 0.0
+                    dwdr = 0.0
+                    if ti.static(self.xsph_on):
+                        wij, dwdr = kernels.w_and_dw_dr(r, hij, self.dim)
+                    else:
+                        dwdr = kernels.dw_dr(r, hij, self.dim)
                     gw = dwdr / r * rij
                     f_ij = operators.laplacian_weight(r, hij, self.eta2, self.dim)
                     kj = sj[self.S_KIND]
-                    prj = qj[self.Q_PR]
                     if kj == WALL:
                         # boundary particle: the virtual velocity of eq 50-51, the density of i and the
                         # pressure of i extrapolated hydrostatically to it (Neumann condition)
@@ -557,6 +559,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
                         nrm = self.normal[j]
                         beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
                         vij = terms.boundary_relative_velocity(vi - self._vel(sj), nrm, beta, self.no_slip)
+                        div -= self.vol0 * vij.dot(gw)
                         mj = rhoi * self.vol0
                         # pressure at the wall particle: hydrostatic across the wall, the gradient at i
                         # along it (mirror image of the excess pressure), p_w = p_i + rho_i g . d_n +
@@ -574,16 +577,17 @@ class WCSPHSolver(SoilStep, SolverCommon):
                             acc -= mj * pij * gw
                     else:
                         vij = vi - self._vel(sj)
-                        rhoj = qj[self.Q_RHO]
                         mj = sj[self.S_M]
+                        div -= mj / sj[self.S_RHO] * vij.dot(gw)
+                        if ti.static(self.xsph_on):
+                            xs += terms.xsph(mj, si[self.S_RHO], sj[self.S_RHO], vij, wij)
+                        rhoj = qj[self.Q_RHO]
+                        prj = qj[self.Q_PR]
                         same = True
                         if ti.static(self.has_air):
                             same = kj == ki
                         if same:
                             accp += terms.pressure_same_material(mj, pri, prj, gw)
-                        else:
-                            accp += terms.pressure_interface(mi, voli, mj / rhoj, pi, prj * rhoj * rhoj, gw)
-                        if same:
                             acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nui, f_ij) * vij
                             if ti.static(self.av_on):
                                 pij = terms.artificial_viscosity(vij, rij, r2, hij, c0i, 0.5 * (rhoi + rhoj),
@@ -592,12 +596,27 @@ class WCSPHSolver(SoilStep, SolverCommon):
                             if ti.static(self.cohesion_on):
                                 acc += terms.cohesion(cohi, mj, gw)
                         else:
+                            accp += terms.pressure_interface(mi, mi / rhoi, mj / rhoj, pi, prj * rhoj * rhoj,
+                                                             gw)
                             nuj = self._nu(ti.cast(kj, ti.i32))
                             acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nuj, f_ij) * vij
                 # a_p = A_p + m_wall a_p (the walls' tangential terms carry G_i = -rho_i a_p)
                 acc += operators.wall_mirror_solve(accp, m_wall, hyd_t)
                 self.a[i] = acc
+                self.rate[i] = ti.Vector([div, self.rate[i][0]])
+                rho = rho_n
+                if dt > 0.0:
+                    dd = div * dt
+                    rho = rho_n * (1.0 - dd)
+                    p = self._eos_pressure(ki, rho)
+                    self.rho[i] = rho
+                    self.p[i] = p
+                    if ti.static(self.xsph_on):
+                        self.xs[i] = self.xsph_eps * xs
+                    if ti.static(self.variable_h):
+                        self.h[i] = ti.min(ti.max(si[self.S_H] * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
                 # reductions
+                voli = mi / rho
                 vs = vi + 0.5 * dt * acc  # synchronised velocity at this time
                 s2 = vs.dot(vs)
                 ke += 0.5 * mi * s2
@@ -609,17 +628,21 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 an = acc.norm()
                 if an > 0.0:
                     ti.atomic_min(h_over_a, hi / an)
-                ti.atomic_min(h_over_c, hi / self._sound_speed(ki, rhoi))
+                ti.atomic_min(h_over_c, hi / self._sound_speed(ki, rho))
                 ti.atomic_min(hmin, hi)
-                val = s2 + pi + xi.sum() + rhoi
+                val = s2 + pi + xi.sum() + rho
                 if ti.math.isnan(val) or ti.math.isinf(val):
                     bad += 1.0
                     ti.atomic_min(first_bad, float(self.ids[i]))
+            if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if)
+                if self.fmask[i] == 2:
+                    self._soil_stress_at(i, dt)
         self.red_forces[None] = ti.Vector([ke, vmax, vol, h_over_a, h_over_c, bad, first_bad, hmin, vol_air])
 
     # ------------------------------------------------------------------ step
-    def neighbour_search(self):
-        """Sort into cells, reorder every particle array, rebuild the lists with the Verlet skin."""
+    def neighbour_search(self, dt: float = 0.0, w=(0.0, 0.0)):
+        """Sort into cells, reorder every particle array, rebuild the lists with the Verlet skin; then the
+        packed views for a pair pass over a step of length dt with the prediction weights w (`_weights`)."""
         self._sort_and_reorder()
         self._k_mask()
         self.r_list = min(self.cell, 2.0 * self.hmax + self.skin)
@@ -627,14 +650,16 @@ class WCSPHSolver(SoilStep, SolverCommon):
             self.grid.build_neighbour_lists(self.x, self.fmask, self.n, self.r_list, self.ids)
         except NeighbourOverflowError as exc:
             raise guard.neighbour_overflow_error(self.step_count, self.time, exc) from None
-        self._k_after_build()
+        self._k_after_build(dt, w[0], w[1])
         self.rebuilds += 1
 
-    def _forces(self, dt: float):
-        t0 = _time.perf_counter()
-        self._k_forces(dt)
+    def _weights(self, dt: float) -> tuple[float, float]:
+        return prediction_weights(dt, self.dt_prev, self.dt_prev2, self.rates_known)
+
+    def _pairs(self, dt: float):
+        self._k_pairs(dt)
+        self.rates_known = min(self.rates_known + 1, 2)
         self.red = self.red_forces[None].to_numpy()
-        self._tick("forces", t0)
         r = self.red
         self.last = {"kinetic_energy": float(r[0]), "max_speed": float(r[1]), "water_volume": float(r[2]),
                      "air_volume": float(r[8])}
@@ -646,7 +671,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
         t0 = _time.perf_counter()
         if self.moving:
             self.motion.set_step(self.time, self.time + dt)
-        self._k_kick_drift(dt, self.dt_prev)
+        w = self._weights(dt)
+        self._k_kick_drift(dt, self.dt_prev, w[0], w[1])
         d2max, hmax = self.red_kick[None].to_numpy()
         if self.variable_h:
             self.hmax = float(hmax)
@@ -657,26 +683,25 @@ class WCSPHSolver(SoilStep, SolverCommon):
         if len(released):
             activate(self, released)
         if len(released) or 2.0 * math.sqrt(max(float(d2max), 0.0)) + 2.0 * self.hmax > self.r_list:
-            self.neighbour_search()
+            self.neighbour_search(dt, w)
         t0 = self._tick("neighbours", t0)
-        self._k_density(dt, self.normalised and self.step_count % self.normalise_every == 0)
-        if self.has_soil:
-            self._soil_stress(dt)
-        self._tick("density", t0)
-        self._forces(dt)
+        if self.normalised and self.step_count % self.normalise_every == 0:
+            self._k_normalise(dt, w[0], w[1])
+        self._pairs(dt)
+        t0 = self._tick("pairs", t0)
         if self.has_soil:
             self._soil_forces(dt)
+            self._tick("soil", t0)
+        self.dt_prev2 = self.dt_prev
         self.dt_prev = dt
         return self.last
 
     def initial_diagnostics(self) -> dict:
-        """Neighbour lists, wall pressure and forces at t = 0 (the first step needs a^0). The soil's pore
-        pressure and water presence are interpolated first (a stress pass with dt = 0 changes nothing
-        else), so that a^0 of the soil sees its pore pressure."""
+        """Neighbour lists, forces at t = 0 (the first step needs a^0) and the divergence D^0 that the first
+        steps' predictions start from. The soil's pore pressure and water presence are interpolated before
+        its forces, so that a^0 of the soil sees its pore pressure."""
         self.neighbour_search()
-        if self.has_soil:
-            self._soil_stress(0.0)
-        self._forces(0.0)
+        self._pairs(0.0)
         if self.has_soil:
             self._soil_forces(0.0)
         return self.last
@@ -736,11 +761,11 @@ class WCSPHSolver(SoilStep, SolverCommon):
     #: the last list build; with the Verlet neighbour lists themselves (kept between rebuilds); the soil's
     #: effective stress, plastic strain, pore pressure, water presence and drag (soil_step.py; one-element
     #: fields in a scene without soil).
-    state_fields = ("x", "v", "a", "xs", "normal", "x0", "rho", "p", "h", "m", "wdepth", "kind", "ids", "active",
-                    "fmask", "s", "q", "sig", "eps_p", "pore", "phi_w", "adrag", "wall_body",
+    state_fields = ("x", "v", "a", "xs", "rate", "normal", "x0", "rho", "p", "h", "m", "wdepth", "kind",
+                    "ids", "active", "fmask", "s", "q", "sig", "eps_p", "pore", "phi_w", "adrag", "wall_body",
                     "wall_origin")
-    state_scalars = ("step_count", "time", "removed_total", "dt_prev", "r_list", "hmax", "rebuilds", "red",
-                     "red_s")
+    state_scalars = ("step_count", "time", "removed_total", "dt_prev", "dt_prev2", "rates_known", "r_list",
+                     "hmax", "rebuilds", "red", "red_s")
 
     @property
     def inflow_state(self) -> np.ndarray:
@@ -767,6 +792,17 @@ class WCSPHSolver(SoilStep, SolverCommon):
         from ..sph.state import restore
 
         restore(self, state, self.state_fields, self.state_scalars, self.grid)
+
+
+def prediction_weights(dt: float, dt_prev: float, dt_prev2: float, known: int) -> tuple[float, float]:
+    """Weights (w1, w2) of the divergence predicted for the step dt, D~ = w1 D^{n-1/2} + w2 D^{n-3/2}: the
+    line through the last two pair passes' divergences (the rates of the half steps t^{n-1/2}, t^{n-3/2})
+    taken to t^{n+1/2}, w1 = 1 + c, w2 = -c with c = (dt + dt_prev) / (dt_prev + dt_prev2); the last one
+    alone after one pass (known = 1), none before (docs/wcsph.md, "One step")."""
+    if known >= 2:
+        c = (dt + dt_prev) / (dt_prev + dt_prev2)
+        return 1.0 + c, -c
+    return (1.0, 0.0) if known == 1 else (0.0, 0.0)
 
 
 def _exponent(gamma: float):
