@@ -23,7 +23,8 @@ def _solver(monkeypatch_interior: bool, side: int = 2):
         # porous ground in the pool's right-hand end: the rule runs only in scenes with soil
         "soil": {"regions": [{"min": [0.22, 0.0], "max": [0.3, 0.05], "eps0": 0.5, "d50": 0.01}]},
         "water": [{"min": [0.0, 0.0], "max": [0.3, 0.05]},
-                  {"min": [0.10, 0.20], "max": [0.10 + side * DX, 0.20 + side * DX]}]})  # a drop above the pool
+                  # a drop of side x side particles above the pool
+                  {"min": [0.10, 0.20], "max": [0.10 + side * DX, 0.20 + side * DX]}]})
     solver = ISPHSolver(cfg, build_scene(cfg))
     solver.initial_diagnostics()
     if monkeypatch_interior:

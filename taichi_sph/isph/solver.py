@@ -380,9 +380,10 @@ class ISPHSolver(SolverCommon):
         iterations for a 2 x 2 drop in the air). A body of fewer particles than eq 34's free-water
         threshold N_surf (17 in 2D, 48 in 3D) cannot hold a particle with a full support of water, so
         all of it is free surface (a drop); a larger one gets one Dirichlet row, on its particle with the
-        fewest water neighbours, which fixes its pressure level and keeps it incompressible. Bodies are found by propagating the lowest index through the
-        water pairs, BODY_SWEEPS times; a body not settled by then (wider than that many pair hops) is
-        left as it is: it is large, and a large body has a surface the tests find. Only with porous ground
+        fewest water neighbours, which fixes its pressure level and keeps it incompressible. Bodies are
+        found by propagating the lowest index through the water pairs, BODY_SWEEPS times; a body not
+        settled by then (wider than that many pair hops) is left as it is: it is large, and a large body
+        has a surface the tests find. Only with porous ground
         (`soil`): in free water eq 34's count finds every drop (a body of fewer than N_surf particles has
         no particle with N_surf neighbours), and the pass costs ~5 % of a small step (800 particles)."""
         self._k_body_init()

@@ -105,8 +105,9 @@ class Inflow:
             self.done[s] = max(self.done[s], k)
             if src.level is not None and self.gate[s] and self.done[s] == len(rows) and s not in self.empty:
                 self.empty.add(s)
-                log.warning("inflow[%d] is empty at t = %.4g s while its river (probe %s) is below the target "
-                            "level %.4g m: make its box larger", s, t, src.level_probe, self.target(s, t))
+                log.warning("inflow[%d] is empty at t = %.4g s while its river (probe %s) is below the "
+                            "target level %.4g m: make its box larger", s, t, src.level_probe,
+                            self.target(s, t))
         return np.concatenate(ids) if ids else np.zeros(0, np.int64)
 
     @property
