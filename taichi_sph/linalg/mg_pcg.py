@@ -191,6 +191,25 @@ class MGPCG(EllPCG):
         return cc
 
     @ti.func
+    def _child(self, CC, ch):
+        """Coordinates of child ch (0 .. 2^dim - 1, one bit per axis, the first axis highest) of the
+        coarse cell CC on the level below."""
+        fc = 2 * CC
+        for a in ti.static(range(self.dim)):
+            fc[a] += (ch >> ti.static(self.dim - 1 - a)) & 1
+        return fc
+
+    @ti.func
+    def _in_level(self, l, cc):
+        """1 when the cell coordinates cc lie inside level l's grid (a coarse cell on an odd edge has
+        fewer children), else 0."""
+        inside = 1
+        for a in ti.static(range(self.dim)):
+            if cc[a] >= self.lev_dim[l, a]:
+                inside = 0
+        return inside
+
+    @ti.func
     def _lin(self, l, cc):
         lin = 0
         for a in ti.static(range(self.dim)):
@@ -345,13 +364,8 @@ class MGPCG(EllPCG):
             for k in range(self.S):
                 self.st[cb + C, k] = zero
             for ch in range(ti.static(2**self.dim)):
-                fc = 2 * CC
-                inside = 1
-                for a in ti.static(range(self.dim)):
-                    fc[a] += (ch >> ti.static(self.dim - 1 - a)) & 1
-                    if fc[a] >= self.lev_dim[l, a]:
-                        inside = 0
-                if inside == 1:
+                fc = self._child(CC, ch)
+                if self._in_level(l, fc) == 1:
                     f = fb + self._lin(l, fc)
                     for k in range(self.S):
                         v = self.st[f, k]
@@ -452,13 +466,8 @@ class MGPCG(EllPCG):
             CC = self._coords(l + 1, C)
             s = ti.cast(0, self.dtype)
             for ch in range(ti.static(2**self.dim)):
-                fc = 2 * CC
-                inside = 1
-                for a in ti.static(range(self.dim)):
-                    fc[a] += (ch >> ti.static(self.dim - 1 - a)) & 1
-                    if fc[a] >= self.lev_dim[l, a]:
-                        inside = 0
-                if inside == 1:
+                fc = self._child(CC, ch)
+                if self._in_level(l, fc) == 1:
                     f = self._lin(l, fc)
                     if self.w[base + f] != 0:
                         s += self.gb[base + f] - self._g_av(l, base, self.gt, f, fc)
