@@ -29,6 +29,15 @@ Each quantity uses the cubic-spline kernel of the solver (support 2.4 dx, h = 1.
   box (each holds m / rho_w of water).
 - velocity (m/s, dim components): volume-weighted mean velocity of the active water particles in
   the box (in mode isph the Darcy velocity vD of the frames); NaN when the box holds no water.
+- soil_level (m, mode wcsph_biot): the mean over the box's columns (dx wide, from its low corner) of
+  the top of the soil in the column, the highest soil particle inside the box plus dx / 2 (a flat
+  surface reads its true height); a column without soil reads the box's bottom. A crest's height
+  (erosion) or a sand surface's uplift (heave).
+- plastic_strain (1, mode wcsph_biot): the largest accumulated plastic shear strain of the soil
+  particles inside the box; 0 when none is there (yield onset at a toe: metric first_above).
+- water_depth (m): water standing on the ground at a point's column, the water level on the vertical
+  line from `point` less the soil top in that column (as soil_level, for a column dx wide), 0 when
+  the water surface is at or below it (flow over a crest).
 """
 
 from __future__ import annotations
@@ -41,7 +50,7 @@ import numpy as np
 
 from .sph.kernels import SUPPORT_FACTOR, w_np
 
-WATER, WALL = 0, 1
+WATER, WALL, SOIL = 0, 1, 2
 
 #: water fraction below which a pressure gauge is dry and reads 0 Pa
 DRY_FRACTION = 0.1
@@ -50,7 +59,8 @@ SURFACE_FRACTION = 0.5
 #: kernel volume left by walls below which a sample point counts as inside a solid
 SOLID_FREE_FRACTION = 0.25
 
-_UNITS = {"pressure": "Pa", "water_level": "m", "water_volume": "m^3", "velocity": "m/s"}
+_UNITS = {"pressure": "Pa", "water_level": "m", "water_volume": "m^3", "velocity": "m/s", "soil_level": "m",
+          "plastic_strain": "1", "water_depth": "m"}
 
 
 def probe_unit(kind: str, dim: int) -> str:
@@ -206,6 +216,46 @@ def mean_velocity_in_box(lo: Sequence[float], hi: Sequence[float], arrays: Mappi
     return (vel * vol[:, None]).sum(axis=0) / vol.sum()
 
 
+def _soil(arrays: Mapping[str, np.ndarray]) -> np.ndarray:
+    return (np.asarray(arrays["kind"]) == SOIL) & np.asarray(arrays["active"], dtype=bool)
+
+
+def soil_level_in_box(lo: Sequence[float], hi: Sequence[float], arrays: Mapping[str, np.ndarray],
+                      dx: float) -> float:
+    """Mean soil top (m) over the box's columns: in each column dx wide (per horizontal axis, from the
+    low corner) the highest soil particle inside the box plus dx / 2, or the box's bottom without one."""
+    pos = np.asarray(arrays["position"], dtype=float)
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    sel = _soil(arrays) & _in_box(pos, lo, hi)
+    counts = np.maximum(np.ceil((hi[:-1] - lo[:-1]) / dx - 1e-9).astype(int), 1)
+    top = np.full(counts, lo[-1])
+    if sel.any():
+        cell = np.minimum(((pos[sel, :-1] - lo[:-1]) / dx).astype(int), counts - 1)
+        z = np.minimum(pos[sel, -1] + 0.5 * dx, hi[-1])
+        np.maximum.at(top, tuple(cell.T), z)
+    return float(top.mean())
+
+
+def max_plastic_strain_in_box(lo: Sequence[float], hi: Sequence[float], arrays: Mapping[str, np.ndarray]) -> float:
+    """Largest plastic strain of the soil particles inside the box; 0 when there are none."""
+    if "plastic_strain" not in arrays:
+        return 0.0
+    pos = np.asarray(arrays["position"], dtype=float)
+    sel = _soil(arrays) & _in_box(pos, lo, hi)
+    return float(np.asarray(arrays["plastic_strain"], dtype=float)[sel].max()) if sel.any() else 0.0
+
+
+def water_depth(point: Sequence[float], arrays: Mapping[str, np.ndarray], dx: float) -> float:
+    """Water standing on the ground in the column of `point` (m): water level less soil top, at least 0."""
+    p = np.asarray(point, dtype=float)
+    lo, hi = p.copy(), p.copy()
+    lo[:-1] -= 0.5 * dx
+    hi[:-1] += 0.5 * dx
+    hi[-1] = np.inf
+    ground = soil_level_in_box(lo, hi, arrays, dx)
+    return max(water_level(point, arrays, dx) - ground, 0.0)
+
+
 def evaluate(probe, arrays: Mapping[str, np.ndarray], dx: float):
     """Value of one probe (a config `Probe`): a float, or a (dim,) array for velocity."""
     if probe.type == "pressure":
@@ -216,6 +266,12 @@ def evaluate(probe, arrays: Mapping[str, np.ndarray], dx: float):
         return water_volume_in_box(probe.box.min, probe.box.max, arrays)
     if probe.type == "velocity":
         return mean_velocity_in_box(probe.box.min, probe.box.max, arrays)
+    if probe.type == "soil_level":
+        return soil_level_in_box(probe.box.min, probe.box.max, arrays, dx)
+    if probe.type == "plastic_strain":
+        return max_plastic_strain_in_box(probe.box.min, probe.box.max, arrays)
+    if probe.type == "water_depth":
+        return water_depth(probe.point, arrays, dx)
     raise ValueError(f"unknown probe type {probe.type!r}")
 
 

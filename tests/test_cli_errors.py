@@ -78,6 +78,11 @@ CASES = [
     case("inside-soil-off-the-soil", ["--config", "configs/embankment.yaml", "--variant", "dry", "--set",
                                       "water.0.inside_soil=true", "--set", "water.0.max=[0.2,0.08]"],
          ["'water[0].inside_soil'", "overlaps no soil block"]),
+    case("water-table-x-not-increasing", ["--set", "water.0.table=[[0.2, 0.1], [0.1, 0.0]]"],
+         ["'water[0].table'", "increase"]),
+    case("water-table-point-length", ["--set", "water.0.table=[[0.2, 0.1], [0.3]]"], ["'water[0].table[1]'"]),
+    case("soil-probe-without-soil", ["--set", "probes=[{name: s, type: soil_level, box: {min: [0.1, 0.0], "
+                                     "max: [0.2, 0.1]}}]"], ["'probes[0].type'", "soil_blocks"]),
     case("inflow-in-isph", ["--set", "inflow=[{min: [0.0, 0.3], max: [0.1, 0.4], rate: 0.01}]"],
          ["'inflow[0]'", "wcsph_biot"]),
     case("inflow-level-without-probe",

@@ -259,3 +259,31 @@ def test_embankment_first_yield_at_landside_toe(run_cli, tmp_path):
         de = rf.field("plastic_strain", rf.n_frames - 1)[soil] - rf.field("plastic_strain", 0)[soil]
     near_toe = np.linalg.norm(x0 - np.array([1.375, 0.0]), axis=1) < 0.3
     assert near_toe.sum() > 20 and de[near_toe].max() < 1e-3, (near_toe.sum(), de[near_toe].max())
+
+
+def test_water_table_cuts_a_block_to_a_phreatic_line(tmp_path):
+    """`water[k].table`: a block keeps its lattice points at or below the polyline. Reference: the area
+    under the line (a levee's pore water below a falling phreatic line, the river level beside it) over
+    dx^2 (measured: 300 points, the area's 300.0; the line passes between lattice rows here, so a
+    bound of 2 points allows only for points on the line itself)."""
+    from taichi_sph.config import load_config
+    from taichi_sph.scene import WATER, build_scene
+
+    cfg_path = tmp_path / "table.yaml"
+    cfg_path.write_text("""
+mode: wcsph_biot
+dim: 2
+dx: 0.01
+end_time: 0.01
+tank: {size: [1.0, 0.2]}
+soil_blocks:
+  - {shape: mound, toe: [0.2, 0.8], crest: [0.45, 0.55], bottom: 0.0, top: 0.1}
+water:
+  - {min: [0.0, 0.0], max: [0.9, 0.06], table: [[0.3, 0.06], [0.7, 0.0]]}
+""")
+    scene = build_scene(load_config(str(cfg_path)))
+    pos = scene.position[scene.kind == WATER]
+    area = 0.3 * 0.06 + 0.5 * 0.4 * 0.06  # river and pore water up to x 0.3, then the falling line
+    assert abs(len(pos) - area / 0.01**2) <= 2
+    line = np.interp(pos[:, 0], [0.3, 0.7], [0.06, 0.0])
+    assert np.all(pos[:, 1] <= line + 1e-9) and pos[:, 0].max() < 0.7

@@ -169,3 +169,45 @@ def test_surge_front_is_the_edge_of_the_water_body():
     # a 10-particle film reads 9.67 dx: its last particle alone holds phi = 0.5 about 0.17 dx past its centre
     film = np.stack([a + DX / 2 + DX * np.arange(10), np.full(10, DX / 2)], axis=1)
     assert 9.5 * DX < surge_front(line, arrays(film), DX) - a < 10.0 * DX
+
+
+def _sand_bed(top=0.2, water_top=None):
+    """A soil lattice [0, L] x [0, top] over a floor, with water to `water_top` over it (pore water on the
+    same lattice, as mode wcsph_biot fills a bed), and plastic strain growing with x."""
+    soil = _lattice([0, 0], [L, top])
+    water = _lattice([0, 0], [L, water_top]) if water_top else np.zeros((0, 2))
+    floor = _lattice([-3 * DX, -3 * DX], [L + 3 * DX, 0])
+    pos = np.concatenate([soil, water, floor])
+    kind = np.r_[np.full(len(soil), 2), np.zeros(len(water)), np.ones(len(floor))].astype(np.int8)
+    strain = np.where(kind == 2, pos[:, 0], 0.0)
+    return {"position": pos, "velocity": np.zeros_like(pos), "pressure": np.zeros(len(pos)), "kind": kind,
+            "active": np.ones(len(pos), bool), "volume": np.full(len(pos), DX * DX), "plastic_strain": strain}
+
+
+def test_soil_level_reads_the_bed_surface_and_its_uplift():
+    from taichi_sph.probes import soil_level_in_box
+
+    arrays = _sand_bed()
+    # a flat lattice surface: the top row at 0.19 plus dx / 2 is the block's face, exactly
+    assert soil_level_in_box([0.1, 0.0], [0.3, 1.0], arrays, DX) == pytest.approx(0.2, abs=1e-12)
+    # lift the top row of half the box's columns by 1 mm: the mean rises by half of it
+    pos = arrays["position"]
+    lifted = (arrays["kind"] == 2) & (pos[:, 1] > 0.18) & (pos[:, 0] > 0.1) & (pos[:, 0] < 0.2)
+    pos[lifted, 1] += 1e-3
+    assert soil_level_in_box([0.1, 0.0], [0.3, 1.0], arrays, DX) == pytest.approx(0.2 + 0.5e-3, abs=1e-12)
+    # columns with no soil in the box read its bottom
+    assert soil_level_in_box([0.1, 0.25], [0.3, 1.0], arrays, DX) == pytest.approx(0.25, abs=1e-12)
+
+
+def test_plastic_strain_and_water_depth_probes():
+    from taichi_sph.probes import max_plastic_strain_in_box, water_depth
+
+    arrays = _sand_bed(top=0.2, water_top=0.26)
+    # the largest strain of the soil in the box: the particle nearest its right face (strain = x here)
+    assert max_plastic_strain_in_box([0.1, 0.0], [0.2, 0.3], arrays) == pytest.approx(0.19, abs=1e-12)
+    assert max_plastic_strain_in_box([0.1, 0.25], [0.2, 0.3], arrays) == 0.0  # no soil there
+    # 6 cm of water over the bed: the water level (the kernel surface, within 0.05 dx of the block's face
+    # as test_water_level_* measures) less the soil top
+    assert water_depth([0.21, 0.0], arrays, DX) == pytest.approx(0.06, abs=0.05 * DX)
+    # water only in the pores, its table 4 cm under the surface: nothing stands on the ground
+    assert water_depth([0.21, 0.0], _sand_bed(top=0.2, water_top=0.16), DX) == 0.0

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import Annotated, ClassVar, Literal, Optional
 
+import numpy as np
 from pydantic import Field, model_validator
 
 from ..sph.support import SUPPORT_FACTOR
@@ -105,6 +106,31 @@ class WaterBlock(Box):
     #: fills the pores of the ground up to its top (a levee saturated up to a phreatic level) and
     #: leaves the open ground above and beside the soil dry; needs `soil_blocks`
     inside_soil: bool = False
+    #: a water table [[x, z], ...] (m): keep only the block's lattice points at or below this polyline,
+    #: heights z at positions x along the first axis, linear between points and level beyond the ends
+    #: (a levee's phreatic line that falls from the river to the landside floor); default none (the box)
+    table: Optional[list[list[float]]] = None
+
+    @model_validator(mode="after")
+    def _table_points(self):
+        """The water table has at least two [x, z] points with x increasing."""
+        if self.table is not None:
+            if len(self.table) < 2:
+                fail("table", f"needs at least two [x, z] points (got {len(self.table)})")
+            for k, point in enumerate(self.table):
+                if len(point) != 2:
+                    fail(f"table[{k}]", f"needs [x, z] (got {point})")
+            xs = [x for x, _ in self.table]
+            if any(b <= a for a, b in zip(xs, xs[1:])):
+                fail("table", f"x must increase (got {xs})")
+        return self
+
+    def below_table(self, pts):
+        """Mask of the points (N, dim) at or below `table` (all of them without one)."""
+        if self.table is None:
+            return np.ones(len(pts), bool)
+        xs, zs = np.asarray(self.table, float).T
+        return pts[:, -1] <= np.interp(pts[:, 0], xs, zs) + 1e-9
 
 
 class Tank(Strict):

@@ -17,7 +17,8 @@ ImageField = Literal["speed", "pressure", "density", "kind", "porosity", "veloci
 #: a name usable as an HDF5 group and a CSV column in numpy and pandas
 ProbeName = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", max_length=64)]
 #: the geometry each probe type reads
-PROBE_GEOMETRY = {"pressure": "point", "water_level": "point", "water_volume": "box", "velocity": "box"}
+PROBE_GEOMETRY = {"pressure": "point", "water_level": "point", "water_volume": "box", "velocity": "box",
+                  "soil_level": "box", "plastic_strain": "box", "water_depth": "point"}
 
 
 class Images(Strict):
@@ -75,8 +76,11 @@ class Probe(Strict):
     name: ProbeName
     #: pressure: SPH (Shepard) pressure of the water at `point` (Pa); water_level: elevation of the
     #: water surface on the vertical line that rises from `point` (m); water_volume: water inside
-    #: `box` (m^3, m^2 in 2D); velocity: mean velocity of the water inside `box` (m/s, dim components)
-    type: Literal["pressure", "water_level", "water_volume", "velocity"]
+    #: `box` (m^3, m^2 in 2D); velocity: mean velocity of the water inside `box` (m/s, dim components);
+    #: soil_level: mean top of the soil over `box`'s columns (m); plastic_strain: largest plastic strain
+    #: of the soil in `box`; water_depth: water standing on the ground at `point`'s column (m)
+    type: Literal["pressure", "water_level", "water_volume", "velocity", "soil_level", "plastic_strain",
+                  "water_depth"]
     #: location (m), dim values, inside the tank (types pressure and water_level)
     point: Optional[list[float]] = None
     #: region (m), inside the tank (types water_volume and velocity)
@@ -184,6 +188,8 @@ def check_probes(cfg) -> None:
             need_len(probe.box.min, cfg.dim, f"{key}.box.min")
             need_len(probe.box.max, cfg.dim, f"{key}.box.max")
             inside(probe.box.min, probe.box.max, cfg.tank.size, f"{key}.box")
+        if probe.type in ("soil_level", "plastic_strain") and not (cfg.mode == "wcsph_biot" and cfg.soil_blocks):
+            fail(f"{key}.type", f"{probe.type} reads soil particles: it needs mode wcsph_biot with soil_blocks")
         if probe.every is not None and isinstance(cfg.dt, float) and probe.every < cfg.dt:
             fail(f"{key}.every", f"must be at least dt = {cfg.dt}")
 
