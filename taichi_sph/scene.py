@@ -308,6 +308,8 @@ def build_scene(cfg) -> Scene:
         pts = porous_lattice(box.min, box.max, dx, box.porosity)
         if getattr(box, "inside_soil", False):  # pore water only: the block's points inside soil blocks
             pts = pts[soil_block_index(cfg, pts) >= 0]  # not empty: config check
+        elif getattr(box, "outside_soil", False):  # open water only: the ground's pores stay dry
+            pts = pts[soil_block_index(cfg, pts) < 0]
         pts = pts[box.below_table(pts)]  # a water table (`water[k].table`) cuts the block's top
         if box.jitter > 0:
             pts = pts + np.random.default_rng(len(water)).uniform(-box.jitter, box.jitter, pts.shape) * dx

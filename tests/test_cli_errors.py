@@ -78,6 +78,15 @@ CASES = [
     case("inside-soil-off-the-soil", ["--config", "configs/embankment.yaml", "--variant", "dry", "--set",
                                       "water.0.inside_soil=true", "--set", "water.0.max=[0.2,0.08]"],
          ["'water[0].inside_soil'", "overlaps no soil block"]),
+    case("obstacle-ramp-with-oscillation",
+         ["--set", "obstacles=[{min: [0.1, 0.1], max: [0.15, 0.15], motion: {amplitude: [0.01, 0], period: 1, "
+          "ramp: 0.5}}]"], ["'obstacles[0].motion.ramp'", "constant velocity"]),
+    case("obstacle-ramp-longer-than-half-the-motion",
+         ["--set", "obstacles=[{min: [0.1, 0.1], max: [0.15, 0.15], motion: {velocity: [0.1, 0], stop: 0.5, "
+          "ramp: 0.5}}]"], ["'obstacles[0].motion.ramp'", "0.25"]),
+    case("water-outside-and-inside-soil", ["--config", "configs/embankment.yaml", "--variant", "dry", "--set",
+                                           "water.0.inside_soil=true", "--set", "water.0.outside_soil=true"],
+         ["'water[0].outside_soil'"]),
     case("water-table-x-not-increasing", ["--set", "water.0.table=[[0.2, 0.1], [0.1, 0.0]]"],
          ["'water[0].table'", "increase"]),
     case("water-table-point-length", ["--set", "water.0.table=[[0.2, 0.1], [0.3]]"], ["'water[0].table[1]'"]),

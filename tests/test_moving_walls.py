@@ -106,3 +106,24 @@ def test_resume_with_a_moving_plate(run_cli, tmp_path, mode):
     r = run_cli("resume", half, "--set", "end_time=0.02", "--no-progress")
     assert r.returncode == 0, r.stderr
     _same_runs(full, half)
+
+
+def test_ramped_velocity_reaches_its_distance_with_bounded_acceleration():
+    """`motion.ramp`: the speed follows a half cosine up after start and down before stop. References: the
+    distance is V (stop - start - ramp) (the two half-cosine ramps each cover half the distance at full
+    speed) and the largest acceleration pi V / (2 ramp); the speed never exceeds V."""
+    from taichi_sph.sph.wall_motion import Motion
+
+    v, ramp = 0.1, 1.0
+    m = Motion(0.5, 6.5, velocity=np.array([v, 0.0]), ramp=ramp)
+    t = np.linspace(0.0, 7.0, 70001)
+    d = np.array([m.displacement(s)[0] for s in t])
+    speed = np.gradient(d, t)
+    accel = np.gradient(speed, t)
+    assert d[-1] == pytest.approx(v * (6.0 - ramp), rel=1e-12)
+    assert speed.max() <= v * (1 + 1e-9) and speed[t < 0.5].max() == 0.0
+    # finite differences on a 0.1 ms grid resolve the cosine's peak to 1e-6 relative
+    assert np.abs(accel).max() == pytest.approx(np.pi * v / (2 * ramp), rel=1e-4)
+    # without a stop the body keeps its full speed after the ramp
+    m = Motion(0.0, np.inf, velocity=np.array([v, 0.0]), ramp=ramp)
+    assert m.displacement(3.0)[0] == pytest.approx(v * (3.0 - ramp / 2), rel=1e-12)

@@ -106,10 +106,19 @@ class WaterBlock(Box):
     #: fills the pores of the ground up to its top (a levee saturated up to a phreatic level) and
     #: leaves the open ground above and beside the soil dry; needs `soil_blocks`
     inside_soil: bool = False
+    #: mode wcsph_biot: keep only the block's lattice points outside soil blocks (open water beside
+    #: ground whose pores stay dry: a river against a dry levee); needs `soil_blocks`
+    outside_soil: bool = False
     #: a water table [[x, z], ...] (m): keep only the block's lattice points at or below this polyline,
     #: heights z at positions x along the first axis, linear between points and level beyond the ends
     #: (a levee's phreatic line that falls from the river to the landside floor); default none (the box)
     table: Optional[list[list[float]]] = None
+
+    @model_validator(mode="after")
+    def _one_soil_side(self):
+        if self.inside_soil and self.outside_soil:
+            fail("outside_soil", "a block fills the soil's pores (inside_soil) or the space outside it, not both")
+        return self
 
     @model_validator(mode="after")
     def _table_points(self):
@@ -167,6 +176,11 @@ class ObstacleMotion(Strict):
     start: NonNegFloat = 0.0
     #: time the motion stops (s); default: never (it runs to end_time)
     stop: Optional[PosFloat] = None
+    #: constant velocity only: the speed grows from 0 to `velocity` over this many seconds after `start`
+    #: (and falls back to 0 over as many before `stop`) along a half cosine, so the acceleration stays
+    #: at most pi |velocity| / (2 ramp) and the water the body pushes sees no pressure jump (a piston
+    #: that raises a river without a water hammer); 0: the speed jumps
+    ramp: NonNegFloat = 0.0
 
     @model_validator(mode="after")
     def _one_motion(self):
@@ -180,6 +194,11 @@ class ObstacleMotion(Strict):
             fail("period", "is needed with amplitude")
         if self.stop is not None and self.stop <= self.start:
             fail("stop", f"must be later than start = {self.start}")
+        if self.ramp > 0 and self.velocity is None:
+            fail("ramp", "belongs to a constant velocity, not to an oscillation")
+        if self.ramp > 0 and self.stop is not None and self.stop - self.start < 2 * self.ramp:
+            fail("ramp", f"the speed must ramp up and down between start and stop: at most (stop - start) / 2 "
+                 f"= {(self.stop - self.start) / 2:g}")
         return self
 
 

@@ -220,6 +220,8 @@ def check_mode_sections(cfg: Config) -> None:
                 fail(f"water[{k}].start_head", f"applies to mode wcsph_biot only (mode is {cfg.mode})")
             if block.inside_soil:
                 fail(f"water[{k}].inside_soil", f"applies to mode wcsph_biot only (mode is {cfg.mode})")
+            if block.outside_soil:
+                fail(f"water[{k}].outside_soil", f"applies to mode wcsph_biot only (mode is {cfg.mode})")
 
 
 #: the rules Config runs, in this order (each raises base.fail naming the key)

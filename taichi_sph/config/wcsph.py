@@ -298,6 +298,8 @@ def check_soil_blocks(cfg) -> None:
     for k, blk in enumerate(cfg.soil_blocks):
         blk.check_in_tank(cfg.dim, cfg.tank.size, f"soil_blocks[{k}]")
     for k, block in enumerate(cfg.water):
+        if block.outside_soil and cfg.mode == "wcsph_biot" and not cfg.soil_blocks:
+            fail(f"water[{k}].outside_soil", "needs soil_blocks (the water is kept out of them)")
         if block.inside_soil and cfg.mode == "wcsph_biot":
             if not cfg.soil_blocks:
                 fail(f"water[{k}].inside_soil", "needs soil_blocks (the water fills their pores)")

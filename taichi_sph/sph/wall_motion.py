@@ -35,20 +35,37 @@ class Motion:
     velocity: np.ndarray | None = None
     amplitude: np.ndarray | None = None
     period: float = 0.0
+    #: seconds over which a constant velocity ramps up after start and down before stop (half cosine)
+    ramp: float = 0.0
 
     @classmethod
     def from_config(cls, m) -> "Motion":
         stop = math.inf if m.stop is None else float(m.stop)
         if m.amplitude is not None:
             return cls(float(m.start), stop, amplitude=np.asarray(m.amplitude, float), period=float(m.period))
-        return cls(float(m.start), stop, velocity=np.asarray(m.velocity, float))
+        return cls(float(m.start), stop, velocity=np.asarray(m.velocity, float), ramp=float(getattr(m, "ramp", 0.0)))
+
+    def _ramped(self, tau: float) -> float:
+        """Distance covered at unit speed tau seconds after start, the speed (1 - cos(pi u / T)) / 2 over
+        the first T = ramp seconds and mirrored over the last T before stop."""
+        T = self.ramp
+        if T <= 0.0:
+            return tau
+
+        def up(u: float) -> float:
+            return u / 2.0 - T / (2.0 * math.pi) * math.sin(math.pi * u / T) if u < T else u - T / 2.0
+
+        span = self.stop - self.start
+        if tau <= span - T:
+            return up(tau)
+        return up(span - T) + up(T) - up(span - tau)
 
     def displacement(self, t: float) -> np.ndarray:
         """Displacement at time t from the configured place."""
         tau = max(0.0, min(t, self.stop) - self.start)
         if self.amplitude is not None:
             return self.amplitude * math.sin(2.0 * math.pi * tau / self.period)
-        return self.velocity * tau
+        return self.velocity * self._ramped(tau)
 
     def step_velocity(self, t0: float, t1: float) -> np.ndarray:
         """Mean velocity over the step [t0, t1] (displacement over the step / its length), so that the

@@ -56,6 +56,8 @@ def head_pressure(cfg, position: np.ndarray, kind: np.ndarray, p: np.ndarray, rh
         inside = np.all((position >= lo - 1e-9) & (position <= hi + 1e-9), axis=1) & ~taken
         if getattr(blk, "inside_soil", False):  # that block filled only the soil's pores
             inside &= soil_block_index(cfg, position) >= 0
+        elif getattr(blk, "outside_soil", False):
+            inside &= soil_block_index(cfg, position) < 0
         inside &= blk.below_table(position)
         if blk.start_head is not None:
             p[inside] = rho0[inside] * g_down * (blk.start_head - position[inside, -1])
