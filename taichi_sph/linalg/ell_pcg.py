@@ -259,8 +259,10 @@ class EllPCG:
         return ti.Vector([ti.cast(self.bb[None], ti.f64), ti.cast(self.rr[None], ti.f64)])
 
     @ti.kernel
-    def _k_iterate(self) -> ti.f64:
-        """One PCG iteration; returns the recurrence |r|^2, or -1 on breakdown (p.Ap <= 0)."""
+    def _k_iterate(self, jacobi: ti.template()) -> ti.f64:
+        """One PCG iteration: p = z + beta p, alpha = r.z / p.Ap, x += alpha p, r -= alpha Ap; with `jacobi`
+        also z = D^-1 r, r.z and the next beta (a preconditioner of its own, as the multigrid V-cycle of
+        mg_pcg.py, computes them itself). Returns the recurrence |r|^2, or -1 on breakdown (p.Ap <= 0)."""
         n = self.n[None]
         zero = ti.cast(0, self.dtype)
         beta = self.beta[None]
@@ -279,19 +281,22 @@ class EllPCG:
             self.breakdown[None] = 1
         alpha = self.alpha[None]
         self.rr[None] = zero
-        self.rz_new[None] = zero
+        if ti.static(jacobi):
+            self.rz_new[None] = zero
         for i in range(n):
             self.x[i] += alpha * self.p[i]
             ri = self.r[i] - alpha * self.ap[i]
-            zi = self.inv_diag[i] * ri
             self.r[i] = ri
-            self.z[i] = zi
             self.rr[None] += ri * ri
-            self.rz_new[None] += ri * zi
-        self.beta[None] = zero
-        if self.rz[None] > 0:
-            self.beta[None] = self.rz_new[None] / self.rz[None]
-        self.rz[None] = self.rz_new[None]
+            if ti.static(jacobi):
+                zi = self.inv_diag[i] * ri
+                self.z[i] = zi
+                self.rz_new[None] += ri * zi
+        if ti.static(jacobi):
+            self.beta[None] = zero
+            if self.rz[None] > 0:
+                self.beta[None] = self.rz_new[None] / self.rz[None]
+            self.rz[None] = self.rz_new[None]
         out = ti.cast(self.rr[None], ti.f64)
         if self.breakdown[None] == 1:
             out = -1.0
@@ -330,7 +335,7 @@ class EllPCG:
 
     def _iterate(self) -> float:
         """One PCG iteration; returns the recurrence |r|^2, or -1 on breakdown."""
-        return self._k_iterate()
+        return self._k_iterate(True)
 
     # ------------------------------------------------------------------ host API
     def check_overflow(self) -> None:

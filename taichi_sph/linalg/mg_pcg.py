@@ -49,8 +49,8 @@ the restriction and the prolongation inside the first post-smoothing sweep, so a
 loops with five matrix-vector products in all. Levels of fewer than SERIAL_BELOW cells run together
 in one serial kernel (on a CPU a parallel loop costs tens of microseconds to dispatch, more than
 their work), the others one parallel kernel per level and direction. One CG iteration is then
-the V-cycle's kernels (z = B r; r.z and beta stay on the device) and `_k_iterate_mg` (p = z + beta p,
-A p with p.Ap, x and r updates, |r|^2 returned to the host).
+the V-cycle's kernels (z = B r; r.z and beta stay on the device) and `EllPCG._k_iterate` without its
+Jacobi step (p = z + beta p, A p with p.Ap, x and r updates, |r|^2 returned to the host).
 The hierarchy is rebuilt in every solve (`_prepare`): rows binned by cell (a counting sort, serial on
 CPU so that the order and the sums are deterministic), the Galerkin products and the weights; its cost
 is in `last_setup_seconds`.
@@ -558,37 +558,6 @@ class MGPCG(EllPCG):
             self.rr[None] += ri * ri
         return ti.Vector([ti.cast(self.bb[None], ti.f64), ti.cast(self.rr[None], ti.f64)])
 
-    @ti.kernel
-    def _k_iterate_mg(self) -> ti.f64:
-        """p = z + beta p, alpha = r.z / p.Ap, x += alpha p, r -= alpha Ap; returns |r|^2 (-1: p.Ap <= 0)."""
-        n = self.n[None]
-        zero = ti.cast(0, self.dtype)
-        beta = self.beta[None]
-        for i in range(n):
-            self.p[i] = self.z[i] + beta * self.p[i]
-        self.pap[None] = zero
-        for i in range(n):
-            api = self.row_times(i, self.p)
-            self.ap[i] = api
-            self.pap[None] += self.p[i] * api
-        self.breakdown[None] = 0
-        self.alpha[None] = zero
-        if self.pap[None] > 0:
-            self.alpha[None] = self.rz[None] / self.pap[None]
-        else:
-            self.breakdown[None] = 1
-        alpha = self.alpha[None]
-        self.rr[None] = zero
-        for i in range(n):
-            self.x[i] += alpha * self.p[i]
-            ri = self.r[i] - alpha * self.ap[i]
-            self.r[i] = ri
-            self.rr[None] += ri * ri
-        out = ti.cast(self.rr[None], ti.f64)
-        if self.breakdown[None] == 1:
-            out = -1.0
-        return out
-
     def _restart(self):
         self._fresh = True
         return tuple(float(v) for v in self._k_residual_plain())
@@ -598,7 +567,7 @@ class MGPCG(EllPCG):
         # iteration or on the final check of the true residual
         self._vcycle(1 if self._fresh else 0)
         self._fresh = False
-        return float(self._k_iterate_mg())
+        return float(self._k_iterate(False))
 
     # ------------------------------------------------------------------ host helpers (tests, tools)
     def apply(self, r) -> np.ndarray:
