@@ -46,9 +46,9 @@ WCSPH_FLAGS = {
     "normalised_density": lambda s: s.normalised,
     "soil": lambda s: s.has_soil,
     "soil_water": lambda s: s.coupled,
-    "soil_fixed": lambda s: s.soil_fixed,
-    "soil_blocks_fixed": lambda s: s.block_fixed,
-    "soil_dilatancy": lambda s: s.dilatant,
+    "soil_fixed": lambda s: s.soil.soil_fixed,
+    "soil_blocks_fixed": lambda s: s.soil.block_fixed,
+    "soil_dilatancy": lambda s: s.soil.dilatant,
 }
 FLAGS = {"isph": ISPH_FLAGS, "wcsph_biot": WCSPH_FLAGS}
 

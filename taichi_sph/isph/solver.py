@@ -31,7 +31,7 @@ from ..linalg.ell_pcg import EllOverflowError, EllPCG
 from ..linalg.mg_pcg import MGPCG
 from ..linalg.sparse_cg import SparseCGSolver
 from ..scene import WALL, WATER
-from ..sph import kernels, operators
+from ..sph import kernels, operators, walls
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
 from ..sph.solver_common import SolverCommon
 from ..sph.wall_motion import WallMotion
@@ -154,10 +154,8 @@ class ISPHSolver(SolverCommon):
         self.any_free = ti.field(ti.i32, ())
         self.grad_c = ti.Vector.field(dim, float, n)
         #: pressure gradient of a water particle next to a wall, from its water neighbours (corrected
-        #: eq 12): the wall pressure's variation along the wall face (_k_wall_pressure)
+        #: eq 12): the wall pressure's variation along the wall face (_wall_pressure_seen)
         self.grad_p_water = ti.Vector.field(dim, float, n)
-        self.wall_acc = ti.field(float, n)
-        self.wall_wsum = ti.field(float, n)
         self.wet = ti.field(ti.i32, n)
         self.dry_walls = sw.dry_walls
         self.up = vec((-self.g_np / max(self.g_abs, 1e-300)).tolist())
@@ -187,6 +185,7 @@ class ISPHSolver(SolverCommon):
         self.particle_fields += self.motion.fields()
 
         self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.re, self.max_nb, period=self.period)
+        self.wall_pressure = walls.WallPressure(self, n)
         self.markers = None
         if self.porous:
             self.markers = _porosity.MarkerSet(scene.markers, dim, scene.lo, scene.hi, self.re)
@@ -551,7 +550,7 @@ class ISPHSolver(SolverCommon):
                     vj = self.v[j]
                     vol = self.mass / self.rho_w
                     if self.kind[j] == WALL:
-                        vj = operators.mirror_velocity(vi, self.v[j], self.normal[j], self.no_slip)
+                        vj = walls.mirror_velocity(vi, self.v[j], self.normal[j], self.no_slip)
                     else:
                         vol = self.mass / (self.eps[j] * self.rho_w)
                     if r > 0.0:
@@ -594,7 +593,7 @@ class ISPHSolver(SolverCommon):
                         nu_j = nu_i
                         m_j = eps_i * self.mass
                         if self.kind[j] == WALL:
-                            vj = operators.mirror_velocity(vi, self.v[j], self.normal[j], self.no_slip)
+                            vj = walls.mirror_velocity(vi, self.v[j], self.normal[j], self.no_slip)
                         else:
                             m_j = self.mass
                             rb_j = self.eps[j] * self.rho_w
@@ -682,7 +681,7 @@ class ISPHSolver(SolverCommon):
                                 # belongs to the viscous term. With the whole velocity reversed, a no-slip
                                 # wall moving along its face put a source 2 m v_w . grad W into every row
                                 # whose wall neighbours are not symmetric about it (near a free surface)
-                                vj = operators.mirror_velocity(vi, self.v[j], self.normal[j], False)
+                                vj = walls.mirror_velocity(vi, self.v[j], self.normal[j], False)
                                 m_w = eps_i * self.mass
                                 div += m_w * (vj - vi).dot(gw)
                             else:
@@ -774,36 +773,25 @@ class ISPHSolver(SolverCommon):
                         s = M.inverse() @ s
                     self.grad_p_water[i] = s
 
-    @ti.kernel
-    def _k_wall_pressure(self):
-        """Wall pressure interpolated from the solved fluid pressure (Adami et al. 2012 form, the
-        virtual-marker idea of the seed): P_w = sum_f W_wf P_w(f) / sum_f W_wf, P_w(f) the value seen
-        from fluid particle f (operators.wall_pressure_along_face: hydrostatic across the wall, the
-        fluid's own gradient along it), accumulated from the fluid side of each pair."""
-        for i in range(self.n):
-            if self.kind[i] == WALL:
-                self.wall_acc[i] = 0.0
-                self.wall_wsum[i] = 0.0
-        for i in range(self.n):
-            if self.solve_mask[i] == 1:
-                xi = self.x[i]
-                for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
-                    if not self._present(j):
-                        continue
-                    if self.kind[j] == WALL:
-                        d = -operators.rel(xi, self.x[j], self.period)
-                        wij = kernels.w(d.norm(), self.h, self.dim)
-                        pw = operators.wall_pressure_along_face(self.p[i], self.rho_w, self.g, self.grad_p_water[i],
-                                                                self.normal[j], d)
-                        ti.atomic_add(self.wall_acc[j], wij * pw)
-                        ti.atomic_add(self.wall_wsum[j], wij)
-        for i in range(self.n):
-            if self.kind[i] == WALL:
-                pw = 0.0
-                if self.wall_wsum[i] > 0.0:
-                    pw = self.wall_acc[i] / self.wall_wsum[i]
-                self.p[i] = pw
+    @ti.func
+    def _wall_source(self, i):
+        """Whether particle i gives the wall particles it sees a pressure (walls.WallPressure): water in
+        the solve."""
+        return self.solve_mask[i] == 1
+
+    @ti.func
+    def _wall_pressure_seen(self, i, j):
+        """Kernel weight and pressure that water particle i gives wall particle j (virtual-marker idea of the
+        seed): walls.wall_pressure_along_face, hydrostatic across the wall and the water's own gradient
+        along it; weight 0 for a dry wall."""
+        wij = 0.0
+        pw = 0.0
+        if self._present(j):
+            d = -operators.rel(self.x[i], self.x[j], self.period)
+            wij = kernels.w(d.norm(), self.h, self.dim)
+            pw = walls.wall_pressure_along_face(self.p[i], self.rho_w, self.g, self.grad_p_water[i],
+                                                self.normal[j], d)
+        return wij, pw
 
     @ti.kernel
     def _k_corrector(self):
@@ -1043,7 +1031,7 @@ class ISPHSolver(SolverCommon):
             self.psol.from_numpy(sol.astype(self.np_fp))
         self._k_scatter_pressure(self.psol)
         self._k_water_gradient()
-        self._k_wall_pressure()
+        self.wall_pressure.update()
         self._k_corrector()
         collisions = 0
         if self.collision:
@@ -1107,12 +1095,6 @@ class ISPHSolver(SolverCommon):
         if self.porous:
             out["porosity"] = np.where(kind == WATER, self.eps.to_numpy()[:n][order], 1.0)
         return out
-
-    def max_speed_bound(self) -> float:
-        if self.cfg.guard.max_speed is not None:
-            return self.cfg.guard.max_speed
-        height = float(self.cfg.tank.size[-1])
-        return 20.0 * math.sqrt(self.g_abs * height) if self.g_abs > 0 else 100.0
 
     # ------------------------------------------------------------------ checkpoints
     #: fields that carry over from one step to the next (all else is recomputed by each step); the

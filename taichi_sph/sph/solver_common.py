@@ -1,6 +1,7 @@
 """What the solvers of both modes share outside their kernels: phase timers and the start of a neighbour
 search (cell sort, removal of particles that left the domain, reordering of every particle array)."""
 
+import math
 import time as _time
 from types import MappingProxyType
 
@@ -9,7 +10,7 @@ from ..instability import out_of_domain
 
 class SolverCommon:
     """Mixin of ISPHSolver and WCSPHSolver. Expects `cfg`, `grid` (sph.grid.NeighbourGrid), `x`, `active`,
-    `ids`, `n`, `particle_fields` (every per-particle field, reordered together), `timers` (dict of
+    `ids`, `n`, `g_abs`, `particle_fields` (every per-particle field, reordered together), `timers` (dict of
     seconds per phase), `removed_total`, `step_count` and `time`. Gives the defaults of the solver contract
     (contract.Solver) that a mode may override."""
 
@@ -23,6 +24,14 @@ class SolverCommon:
     def propose_dt(self) -> tuple[float, int]:
         """Only solvers with `proposes_dt` choose their own time step."""
         raise NotImplementedError(f"{type(self).__name__} does not choose its time step (proposes_dt is False)")
+
+    def max_speed_bound(self) -> float:
+        """Speed above which the guard stops the run: `guard.max_speed`, or 20 sqrt(g H) with H the tank's
+        height (a free fall from the top of the tank reaches sqrt(2 g H))."""
+        if self.cfg.guard.max_speed is not None:
+            return self.cfg.guard.max_speed
+        height = float(self.cfg.tank.size[-1])
+        return 20.0 * math.sqrt(self.g_abs * height) if self.g_abs > 0 else 100.0
 
     def _tick(self, key: str, t0: float) -> float:
         """Add the time since t0 to phase `key`; return now (the start of the next phase)."""

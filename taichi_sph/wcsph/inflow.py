@@ -148,9 +148,9 @@ def activate(solver, ids: np.ndarray) -> None:
         arr[sel] = value
         field.from_numpy(arr)
     if solver.has_soil:
-        arr = solver.adrag.to_numpy()
+        arr = solver.soil.adrag.to_numpy()
         arr[sel] = 0.0
-        solver.adrag.from_numpy(arr)
+        solver.soil.adrag.from_numpy(arr)
     q = solver.q.to_numpy()
     q[sel, solver.Q_RHO] = solver.rho_w
     q[sel, solver.Q_PR] = 0.0

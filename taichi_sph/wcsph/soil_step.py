@@ -1,14 +1,14 @@
-"""Soil passes of mode wcsph_biot (seed 002 sections 2.3-2.5), mixed into WCSPHSolver.
+"""Soil passes of mode wcsph_biot (seed 002 sections 2.3-2.5): the object WCSPHSolver holds as `soil`.
 
 Soil particles (kind 2) are their own set overlapping the fluid sets (the seed's layers, fig 3); the
 fluid pair terms skip them. Per step:
 
-1. stress update (`_soil_stress_at`), in the pair pass of solver.py at x^{n+1} with v^{n+1/2}: velocity
+1. stress update (`stress_at`), in the pair pass of solver.py at x^{n+1} with v^{n+1/2}: velocity
    gradient from soil neighbours and walls (virtual velocity of eq 50-51), strain and spin rates
    (eq 37-38), density by eq 48, effective stress by eq 42-45 (soil.py).
-2. force pass (`_k_soil_forces`), after the pair pass: first the pore pressure p_i = sum_w V_j p_j W_ij /
+2. force pass (`_k_forces`), after the pair pass: first the pore pressure p_i = sum_w V_j p_j W_ij /
    sum_w V_j W_ij from the water's new pressure (eq 5, Shepard-normalised) and the water presence
-   (`_soil_pore_at`), then eq 35 with eq 36, gravity, the pore-pressure force -grad p / rho_s (per unit
+   (`_pore_at`), then eq 35 with eq 36, gravity, the pore-pressure force -grad p / rho_s (per unit
    soil mass, the (1 - n) grad p of the mixture theory over the soil's (1 - n) rho_s) and an optional
    damping (`wcsph.soil.fixed`: the skeleton is rigid, its acceleration and drag are zero).
 3. drag passes (`_k_drag_water`, `_k_drag_soil`, `_k_drag_water_after`): the water's mixture momentum
@@ -30,7 +30,7 @@ import taichi as ti
 from .. import guard
 from ..config.schema import PORE_WATER_STIFFNESS
 from ..scene import SOIL, WALL, WATER
-from ..sph import kernels, operators
+from ..sph import kernels, operators, walls
 from ..switches import held_soil_ids
 from . import soil, terms
 
@@ -39,15 +39,21 @@ _NRED_S = 6
 log = logging.getLogger("taichi_sph")
 
 
-class SoilStep:
-    """Soil state and passes; needs the attributes WCSPHSolver sets before calling `_soil_setup` (among
-    them `switches`, taichi_sph/switches.py)."""
+@ti.data_oriented
+class SoilPasses:
+    """Soil state and passes of a WCSPHSolver `fl`, which holds the particle store they read and write
+    (positions, velocities, the packed views, density, pressure, acceleration, neighbour lists) and calls
+    `stress_at` from its pair pass and `forces` after it. The soil's own fields (effective stress, plastic
+    strain, pore pressure, water presence, drag) are one element long in a scene without soil."""
 
-    def _soil_setup(self, cfg, scene):
+    #: fields and host values that carry over from one step to the next (checkpoints, with the solver's)
+    state_fields = ("sig", "eps_p", "pore", "phi_w", "adrag")
+    state_scalars = ("red_s",)
+
+    def __init__(self, fl, cfg, scene):
+        self.fl = fl
+        sw = fl.switches
         sp = cfg.wcsph.soil
-        self.n_soil = scene.count(SOIL)
-        self.has_soil = self.switches.soil
-        self.coupled = self.switches.soil_water  # pore pressure and drag
         self.rho_g = sp.grain_density
         self.n0 = sp.porosity
         self.rho_sl = (1.0 - sp.porosity) * sp.grain_density
@@ -63,7 +69,7 @@ class SoilStep:
         self.sin_phi, self.c_cos = soil.yield_constants(self.phi_deg, sp.cohesion)
         # plastic flow rule: dilatancy angle psi (0: no plastic volume change)
         self.sin_psi = math.sin(math.radians(sp.dilatancy_angle))
-        self.dilatant = bool(self.switches.soil_dilatancy)
+        self.dilatant = bool(sw.soil_dilatancy)
         if sp.tension_cutoff is not None:
             self.t_cut = sp.tension_cutoff
         else:  # where tau_f vanishes: p = -c cot(phi)
@@ -72,29 +78,31 @@ class SoilStep:
         # pore water stiff beside the skeleton (schema.PORE_WATER_STIFFNESS): K_f / M in the run file, and a
         # warning where a config's sound speed leaves the water softer
         self.run_attrs = {}
-        m_soil = cfg.soil_modulus() if self.has_soil and self.n_water > 0 else None
+        m_soil = cfg.soil_modulus() if fl.has_soil and fl.n_water > 0 else None
         if m_soil is not None:
-            ratio = self.rho_w * self.c_w**2 / m_soil
+            ratio = fl.rho_w * fl.c_w**2 / m_soil
             self.run_attrs["pore_water_modulus_ratio"] = ratio
             if ratio < PORE_WATER_STIFFNESS * (1.0 - 1e-9):
                 log.warning("pore water K_f = rho_w c0^2 = %.4g Pa is %.3g x the soil's constrained modulus M = "
                             "%.4g Pa (below %g): consolidation runs at c_v = k M / gamma_w / (1 + M / K_f), %.0f %% "
                             "of the physical value; raise wcsph.water.sound_speed to %.4g m/s or more (or leave it "
                             "to its default), or check wcsph.soil.youngs_modulus, exponent, poisson",
-                            self.rho_w * self.c_w**2, ratio, m_soil, PORE_WATER_STIFFNESS, 100.0 / (1.0 + 1.0 / ratio),
+                            fl.rho_w * fl.c_w**2, ratio, m_soil, PORE_WATER_STIFFNESS, 100.0 / (1.0 + 1.0 / ratio),
                             cfg.pore_water_speed())
         self.alpha_s = sp.alpha
-        self.g_over_k = self.g_abs / sp.permeability
+        self.g_over_k = fl.g_abs / sp.permeability
         self.damping = sp.damping
         # rigid skeleton: no acceleration, no drag on the soil, no soil dt limit
-        self.soil_fixed = self.switches.soil_fixed
+        self.soil_fixed = sw.soil_fixed
         # soil blocks held rigid on their own (`soil_blocks[k].fixed`: a permeable base); by particle id
         self.fixed_ids = held_soil_ids(cfg, scene)
-        self.block_fixed = self.switches.soil_blocks_fixed
+        self.block_fixed = sw.soil_blocks_fixed
+        self._fields(fl.n)
 
-    def _soil_fields(self, n):
-        ns = n if self.has_soil else 1
-        dim = self.dim
+    def _fields(self, n):
+        fl = self.fl
+        ns = n if fl.has_soil else 1
+        dim = fl.dim
         self.sig = ti.Matrix.field(dim, dim, float, ns)  # effective stress, compression positive
         self.eps_p = ti.field(float, ns)  # accumulated plastic shear strain
         self.pore = ti.field(float, ns)  # pore pressure at soil particles (gauge)
@@ -117,196 +125,201 @@ class SoilStep:
             held[self.fixed_ids] = 1
             self.sfix.from_numpy(held)
         self.red_s = np.array([0.0, 0.0, 1e30, 1e30, 0.0, 0.0])
-        if self.has_soil:
-            self.particle_fields += [self.sig, self.eps_p, self.pore, self.phi_w, self.adrag]
+        #: per-particle fields the solver reorders with its own when it sorts particles into cells
+        self.particle_fields = []
+        if fl.has_soil:
+            self.particle_fields = [self.sig, self.eps_p, self.pore, self.phi_w, self.adrag]
             self.adrag.fill(0.0)
 
     # ------------------------------------------------------------------ kernels
     @ti.func
-    def _soil_stress_at(self, i, dt):
+    def stress_at(self, i, dt):
         """Soil particle i in the pair pass of solver.py: strain and spin rates (eq 37-38), density (eq 48),
         stress (eq 42-45). Reads the packed view s of its soil and wall neighbours only (the water's
-        pressure of this step is not known yet: `_k_soil_pore` interpolates it after the pass)."""
-        si = self.s[i]
-        xi = self._pos(si)
-        vi = self._vel(si)
-        rhoi = si[self.S_RHO]
-        h = self.h0
-        L = ti.Matrix.zero(float, self.dim, self.dim)
-        for k in range(self.grid.nbr_count[i]):
-            j = self.grid.nbr[i, k]
-            sj = self.s[j]
-            kj = sj[self.S_KIND]
+        pressure of this step is not known yet: `_pore_at` interpolates it after the pass)."""
+        fl = self.fl
+        si = fl.s[i]
+        xi = fl._pos(si)
+        vi = fl._vel(si)
+        rhoi = si[fl.S_RHO]
+        h = fl.h0
+        L = ti.Matrix.zero(float, fl.dim, fl.dim)
+        for k in range(fl.grid.nbr_count[i]):
+            j = fl.grid.nbr[i, k]
+            sj = fl.s[j]
+            kj = sj[fl.S_KIND]
             if kj != SOIL and kj != WALL:
                 continue
-            rij = operators.rel(xi, self._pos(sj), self.period)
+            rij = operators.rel(xi, fl._pos(sj), fl.period)
             r2 = rij.dot(rij)
             if r2 >= 4.0 * h * h or r2 == 0.0:
                 continue
             r = ti.sqrt(r2)
-            gw = kernels.dw_dr(r, h, self.dim) / r * rij
+            gw = kernels.dw_dr(r, h, fl.dim) / r * rij
             if kj == SOIL:
-                L += sj[self.S_M] / sj[self.S_RHO] * (self._vel(sj) - vi).outer_product(gw)
+                L += sj[fl.S_M] / sj[fl.S_RHO] * (fl._vel(sj) - vi).outer_product(gw)
             else:
-                db = self.wdepth[j]
-                nrm = self.normal[j]
-                beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
-                vij = terms.boundary_relative_velocity(vi - self.v[j], nrm, beta, self.no_slip)
-                L -= self.vol0 * vij.outer_product(gw)
+                db = fl.wdepth[j]
+                nrm = fl.normal[j]
+                beta = walls.boundary_beta(db, rij.dot(nrm) - db, fl.beta_max)
+                vij = walls.boundary_relative_velocity(vi - fl.v[j], nrm, beta, fl.no_slip)
+                L -= fl.vol0 * vij.outer_product(gw)
         # dt = 0 (the pass of initial_diagnostics) leaves the stress as it is: the return mapping would
         # otherwise re-project a stress lying on the yield surface and move it by rounding
         if dt > 0.0:
             sig, dgam, _e = soil.stress_update(self.sig[i], L, dt, self.e0, self.p_ref, self.m_exp,
                                                self.p_floor, self.nu_s, self.k_fac, self.sin_phi, self.c_cos,
-                                               self.t_cut, self.dim, self.sin_psi, self.dilatant)
+                                               self.t_cut, fl.dim, self.sin_psi, self.dilatant)
             self.sig[i] = sig
             self.eps_p[i] += dgam
-        self.rho[i] = rhoi * (1.0 - L.trace() * dt)
-        if ti.static(not self.coupled):
+        fl.rho[i] = rhoi * (1.0 - L.trace() * dt)
+        if ti.static(not fl.coupled):
             self.pore[i] = 0.0
-            self.p[i] = 0.0
+            fl.p[i] = 0.0
             self.phi_w[i] = 0.0
 
     @ti.func
-    def _soil_pore_at(self, i):
+    def _pore_at(self, i):
         """Pore pressure at soil particle i from the water's pressure of this step, p_i = sum_w V_j p_j W_ij /
         sum_w V_j W_ij (eq 5, Shepard-normalised), and the water presence phi_w; the first of two walks over
-        i's neighbours in `_k_soil_forces` (only i's own values are read there)."""
-        h = self.h0
-        xi = self.x[i]
+        i's neighbours in `_k_forces` (only i's own values are read there)."""
+        fl = self.fl
+        h = fl.h0
+        xi = fl.x[i]
         pn = 0.0
         pd = 0.0
         pdw = 0.0
-        for k in range(self.grid.nbr_count[i]):
-            j = self.grid.nbr[i, k]
-            kj = self.kind[j]
+        for k in range(fl.grid.nbr_count[i]):
+            j = fl.grid.nbr[i, k]
+            kj = fl.kind[j]
             if kj != WATER and kj != WALL:
                 continue
-            rij = operators.rel(xi, self.x[j], self.period)
+            rij = operators.rel(xi, fl.x[j], fl.period)
             r2 = rij.dot(rij)
             if r2 >= 4.0 * h * h:
                 continue
-            wij = kernels.w(ti.sqrt(r2), h, self.dim)
+            wij = kernels.w(ti.sqrt(r2), h, fl.dim)
             if kj == WATER:
-                vj = self.m[j] / self.rho[j]
-                pn += vj * self.p[j] * wij
+                vj = fl.m[j] / fl.rho[j]
+                pn += vj * fl.p[j] * wij
                 pd += vj * wij
             else:
-                pdw += self.vol0 * wij
+                pdw += fl.vol0 * wij
         pore = 0.0
         if pd > 0.0:
             pore = pn / pd
         self.pore[i] = pore
-        self.p[i] = pore
+        fl.p[i] = pore
         # wetness: the water's share of the support not taken by walls (1 in saturated soil beside a wall,
         # whose wall particles take part of the kernel support)
         self.phi_w[i] = ti.min(pd / ti.max(1.0 - pdw, 0.5), 1.0)
 
     @ti.kernel
-    def _k_soil_forces(self, dt: float):
-        """Pore pressure and water presence (`_soil_pore_at`), then eq 35 with eq 36, gravity, pore-pressure
+    def _k_forces(self, dt: float):
+        """Pore pressure and water presence (`_pore_at`), then eq 35 with eq 36, gravity, pore-pressure
         force, damping; reductions: kinetic energy, max speed, min h/|a|, min h/c, non-finite count, first
         bad id."""
+        fl = self.fl
         ke = 0.0
         vmax = 0.0
         h_over_a = 1.0e30
         h_over_c = 1.0e30
         bad = 0.0
         first_bad = 2.0e9
-        h = self.h0
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.fmask[i] == 2:
-                if ti.static(self.coupled):
-                    self._soil_pore_at(i)
-                si = self.s[i]
-                xi = self._pos(si)
-                vi = self._vel(si)
-                rhoi = self.rho[i]
+        h = fl.h0
+        ti.loop_config(serialize=fl.serial)
+        for i in range(fl.n):
+            if fl.fmask[i] == 2:
+                if ti.static(fl.coupled):
+                    self._pore_at(i)
+                si = fl.s[i]
+                xi = fl._pos(si)
+                vi = fl._vel(si)
+                rhoi = fl.rho[i]
                 sigi = self.sig[i]
                 si_r = sigi / (rhoi * rhoi)
-                p_i, _s, _t = soil.mean_and_shear(sigi, self.dim)
+                p_i, _s, _t = soil.mean_and_shear(sigi, fl.dim)
                 ci = ti.sqrt(self.m_fac * soil.youngs_modulus(p_i, self.e0, self.p_ref, self.m_exp, self.p_floor) / rhoi)
                 pore_i = self.pore[i]
-                acc = self.g
-                gradp = ti.Vector.zero(float, self.dim)
+                acc = fl.g
+                gradp = ti.Vector.zero(float, fl.dim)
                 # stress acceleration; the walls carry the stress and the pore pressure across their faces
-                # by the equilibrium gradient and along them by the gradient at i (operators.wall_mirror_solve):
+                # by the equilibrium gradient and along them by the gradient at i (walls.wall_mirror_solve):
                 # m_wall = sum V grad W (x) d_t and g_t = sum V (g . d_t) grad W over the walls serve both
-                accs = ti.Vector.zero(float, self.dim)
-                m_wall = ti.Matrix.zero(float, self.dim, self.dim)
-                g_t = ti.Vector.zero(float, self.dim)
+                accs = ti.Vector.zero(float, fl.dim)
+                m_wall = ti.Matrix.zero(float, fl.dim, fl.dim)
+                g_t = ti.Vector.zero(float, fl.dim)
                 b_fac = 1.0  # the buoyant share of the soil's weight, (1 - phi_w rho_w / rho_s)
-                if ti.static(self.coupled):
-                    b_fac = 1.0 - self.phi_w[i] * self.rho_w / self.rho_g
-                for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
-                    sj = self.s[j]
-                    rij = operators.rel(xi, self._pos(sj), self.period)
+                if ti.static(fl.coupled):
+                    b_fac = 1.0 - self.phi_w[i] * fl.rho_w / self.rho_g
+                for k in range(fl.grid.nbr_count[i]):
+                    j = fl.grid.nbr[i, k]
+                    sj = fl.s[j]
+                    rij = operators.rel(xi, fl._pos(sj), fl.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * h * h or r2 == 0.0:
                         continue
                     r = ti.sqrt(r2)
-                    gw = kernels.dw_dr(r, h, self.dim) / r * rij
-                    kj = sj[self.S_KIND]
+                    gw = kernels.dw_dr(r, h, fl.dim) / r * rij
+                    kj = sj[fl.S_KIND]
                     if kj == SOIL:
-                        mj = sj[self.S_M]
-                        rhoj = self.rho[j]
-                        vij = vi - self._vel(sj)
+                        mj = sj[fl.S_M]
+                        rhoj = fl.rho[j]
+                        vij = vi - fl._vel(sj)
                         pij = terms.artificial_viscosity(vij, rij, r2, h, ci, 0.5 * (rhoi + rhoj), self.alpha_s, 0.0,
-                                                         self.av_eps)
+                                                         fl.av_eps)
                         accs -= mj * (si_r + self.sig[j] / (rhoj * rhoj)) @ gw
                         acc -= mj * pij * gw
                     elif kj == WALL:
                         # boundary particle: the soil's own stress, extrapolated across the wall by its
                         # weight (Neumann) and along it by the stress gradient at i (solved below)
                         xw = xi - rij  # the wall particle's nearest image
-                        db = self.wdepth[j]
-                        nrm = self.normal[j]
+                        db = fl.wdepth[j]
+                        nrm = fl.normal[j]
                         # (its equilibrium gradient: the buoyant unit weight b_fac rho g where water fills
                         # the pores, whose pressure the pore term below extrapolates)
                         dxw = xw - xi
                         dxn = dxw.dot(nrm) * nrm
-                        dsig = b_fac * rhoi * self.g.dot(dxn)
-                        mw = rhoi * self.vol0
-                        m_wall += self.vol0 * gw.outer_product(dxw - dxn)
-                        g_t += self.vol0 * self.g.dot(dxw - dxn) * gw
+                        dsig = b_fac * rhoi * fl.g.dot(dxn)
+                        mw = rhoi * fl.vol0
+                        m_wall += fl.vol0 * gw.outer_product(dxw - dxn)
+                        g_t += fl.vol0 * fl.g.dot(dxw - dxn) * gw
                         sw_r = si_r
-                        if ti.static(not self.no_slip):
+                        if ti.static(not fl.no_slip):
                             # a slip wall carries no shear traction: the mirror image of the stress across
                             # the wall, R sigma R with R = I - 2 n n^T, whose shear on the wall's plane has
                             # the opposite sign (the pair sum cancels it); no-slip walls carry sigma itself
-                            refl = ti.Matrix.identity(float, self.dim) - 2.0 * nrm.outer_product(nrm)
+                            refl = ti.Matrix.identity(float, fl.dim) - 2.0 * nrm.outer_product(nrm)
                             sw_r = refl @ si_r @ refl
-                        accs -= mw * (si_r + sw_r + dsig / (rhoi * rhoi) * ti.Matrix.identity(float, self.dim)) @ gw
-                        beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
-                        vij = terms.boundary_relative_velocity(vi - self.v[j], nrm, beta, self.no_slip)
-                        pij = terms.artificial_viscosity(vij, rij, r2, h, ci, rhoi, self.alpha_s, 0.0, self.av_eps)
+                        accs -= mw * (si_r + sw_r + dsig / (rhoi * rhoi) * ti.Matrix.identity(float, fl.dim)) @ gw
+                        beta = walls.boundary_beta(db, rij.dot(nrm) - db, fl.beta_max)
+                        vij = walls.boundary_relative_velocity(vi - fl.v[j], nrm, beta, fl.no_slip)
+                        pij = terms.artificial_viscosity(vij, rij, r2, h, ci, rhoi, self.alpha_s, 0.0, fl.av_eps)
                         acc -= mw * pij * gw
-                        if ti.static(self.coupled):
+                        if ti.static(fl.coupled):
                             # pore pressure at the wall particle: hydrostatic across the wall (no flow
                             # through it), the gradient at i along it (the mirror image of the excess
                             # pressure): p_w - p_i = rho_w g . dx_n + G_i . dx_t, weighted by phi_w
-                            gradp += self.phi_w[i] * self.vol0 * self.rho_w * self.g.dot(dxn) * gw
+                            gradp += self.phi_w[i] * fl.vol0 * fl.rho_w * fl.g.dot(dxn) * gw
                     elif kj == WATER:  # noqa: SIM102 (compile-time if)
-                        if ti.static(self.coupled):
-                            gradp += sj[self.S_M] / self.rho[j] * (self.p[j] - pore_i) * gw
-                acc += operators.wall_mirror_solve(accs, m_wall, -b_fac * g_t)
-                if ti.static(self.coupled):  # G_i = gradp + phi_w m_wall G_i
+                        if ti.static(fl.coupled):
+                            gradp += sj[fl.S_M] / fl.rho[j] * (fl.p[j] - pore_i) * gw
+                acc += walls.wall_mirror_solve(accs, m_wall, -b_fac * g_t)
+                if ti.static(fl.coupled):  # G_i = gradp + phi_w m_wall G_i
                     pw = self.phi_w[i]
-                    acc -= operators.wall_mirror_solve(gradp, pw * m_wall, pw * self.rho_w * g_t) / self.rho_g
+                    acc -= walls.wall_mirror_solve(gradp, pw * m_wall, pw * fl.rho_w * g_t) / self.rho_g
                 acc -= self.damping * vi
                 if ti.static(self.soil_fixed):
-                    acc = ti.Vector.zero(float, self.dim)
+                    acc = ti.Vector.zero(float, fl.dim)
                 held = False
                 if ti.static(self.block_fixed):
-                    held = self.sfix[self.ids[i]] == 1
+                    held = self.sfix[fl.ids[i]] == 1
                 if held:
-                    acc = ti.Vector.zero(float, self.dim)
-                self.a[i] = acc
+                    acc = ti.Vector.zero(float, fl.dim)
+                fl.a[i] = acc
                 vs = vi + 0.5 * dt * acc
                 s2 = vs.dot(vs)
-                ke += 0.5 * si[self.S_M] * s2
+                ke += 0.5 * si[fl.S_M] * s2
                 ti.atomic_max(vmax, ti.sqrt(s2))
                 an = acc.norm()
                 if an > 0.0:
@@ -317,18 +330,19 @@ class SoilStep:
                 val = s2 + sigi.sum() + xi.sum() + rhoi
                 if ti.math.isnan(val) or ti.math.isinf(val):
                     bad += 1.0
-                    ti.atomic_min(first_bad, float(self.ids[i]))
+                    ti.atomic_min(first_bad, float(fl.ids[i]))
         self.red_soil[None] = ti.Vector([ke, vmax, h_over_a, h_over_c, bad, first_bad])
 
     @ti.func
     def _movable(self, j):
         """Whether soil particle j moves: a held skeleton (`soil.fixed`, a fixed block) takes the drag's
         reaction into its constraint."""
+        fl = self.fl
         movable = True
         if ti.static(self.soil_fixed):
             movable = False
         if ti.static(self.block_fixed):  # noqa: SIM102 (compile-time if)
-            if self.sfix[self.ids[j]] == 1:
+            if self.sfix[fl.ids[j]] == 1:
                 movable = False
         return movable
 
@@ -342,33 +356,34 @@ class SoilStep:
         A = n_i a_i + (1 - n_i) a_bar, held in `amix`; `adrag` gets A - a_i, the pair drag of eq 46-47 and
         the soil's drag share follow in `_k_drag_soil` and `_k_drag_water_after`. `wmix` keeps n_i, the
         weight factor f_i = phi_s / sum_soil V_j W_ij and phi_s for the pair drag."""
-        h = self.h0
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.fmask[i] == 1 and self.kind[i] == WATER:
-                xi = self.x[i]
-                ai = self.a[i]
+        fl = self.fl
+        h = fl.h0
+        ti.loop_config(serialize=fl.serial)
+        for i in range(fl.n):
+            if fl.fmask[i] == 1 and fl.kind[i] == WATER:
+                xi = fl.x[i]
+                ai = fl.a[i]
                 wsum = 0.0
                 nsum = 0.0
-                abar = ti.Vector.zero(float, self.dim)
+                abar = ti.Vector.zero(float, fl.dim)
                 wall = 0.0
-                for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
-                    kj = self.kind[j]
+                for k in range(fl.grid.nbr_count[i]):
+                    j = fl.grid.nbr[i, k]
+                    kj = fl.kind[j]
                     if kj != SOIL and kj != WALL:
                         continue
-                    rij = operators.rel(xi, self.x[j], self.period)
+                    rij = operators.rel(xi, fl.x[j], fl.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * h * h:
                         continue
                     if kj == WALL:
-                        wall += self.vol0 * kernels.w(ti.sqrt(r2), h, self.dim)
+                        wall += fl.vol0 * kernels.w(ti.sqrt(r2), h, fl.dim)
                         continue
-                    rhoj = self.rho[j]
-                    wij = kernels.w(ti.sqrt(r2), h, self.dim) * self.m[j] / rhoj
+                    rhoj = fl.rho[j]
+                    wij = kernels.w(ti.sqrt(r2), h, fl.dim) * fl.m[j] / rhoj
                     wsum += wij
                     nsum += wij * (1.0 - rhoj / self.rho_g)
-                    abar += wij * self.a[j]
+                    abar += wij * fl.a[j]
                 amix = ai
                 wm = ti.Vector([1.0, 0.0, 0.0])
                 if wsum > 0.0:
@@ -390,19 +405,20 @@ class SoilStep:
         q*_ij = (u_i + dt A_i) - (v_j + dt a_j), lambda_ij = n_i (phi_s,i g / k + C_s,j phi_w,j) (the rate
         at which the drag closes u - v_s; C_s,j = 0 for a held skeleton). Both sides evaluate this
         function with the same (water, soil) arguments, so F_ij = -F_ji to rounding."""
-        f = ti.Vector.zero(float, self.dim)
-        rij = operators.rel(self.x[i], self.x[j], self.period)
+        fl = self.fl
+        f = ti.Vector.zero(float, fl.dim)
+        rij = operators.rel(fl.x[i], fl.x[j], fl.period)
         r2 = rij.dot(rij)
-        if r2 < 4.0 * self.h0 * self.h0:
+        if r2 < 4.0 * fl.h0 * fl.h0:
             wm = self.wmix[i]
-            rhoj = self.rho[j]
+            rhoj = fl.rho[j]
             cs = 0.0
             if self._movable(j):
-                cs = (1.0 - rhoj / self.rho_g) * self.rho_w / rhoj * self.g_over_k * self.phi_w[j]
+                cs = (1.0 - rhoj / self.rho_g) * fl.rho_w / rhoj * self.g_over_k * self.phi_w[j]
             lam = wm[0] * (wm[2] * self.g_over_k + cs)
-            c = self.m[i] * wm[0] * self.g_over_k * wm[1] * kernels.w(ti.sqrt(r2), self.h0, self.dim) * (
-                self.m[j] / rhoj)
-            qs = (self.v[i] + dt * self.amix[i]) - (self.v[j] + dt * self.a[j])
+            c = fl.m[i] * wm[0] * self.g_over_k * wm[1] * kernels.w(ti.sqrt(r2), fl.h0, fl.dim) * (
+                fl.m[j] / rhoj)
+            qs = (fl.v[i] + dt * self.amix[i]) - (fl.v[j] + dt * fl.a[j])
             f = -c / (1.0 + dt * lam) * qs
         return f
 
@@ -411,18 +427,19 @@ class SoilStep:
         """Soil side of the Biot drag (eq 46-47, docs/biot.md): the sum of the pair forces -F_ij of
         `_pair_drag` over the water around, per unit soil mass; zero for a held skeleton. In a uniform
         interior this is C_s phi_w (u_bar - v_s) with C_s = n rho_w / rho_soil g / k."""
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.fmask[i] == 2:
-                fsum = ti.Vector.zero(float, self.dim)
-                for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
-                    if self.kind[j] == WATER and self.fmask[j] == 1:
+        fl = self.fl
+        ti.loop_config(serialize=fl.serial)
+        for i in range(fl.n):
+            if fl.fmask[i] == 2:
+                fsum = ti.Vector.zero(float, fl.dim)
+                for k in range(fl.grid.nbr_count[i]):
+                    j = fl.grid.nbr[i, k]
+                    if fl.kind[j] == WATER and fl.fmask[j] == 1:
                         fsum -= self._pair_drag(j, i, dt)
                 if not self._movable(i):
-                    fsum = ti.Vector.zero(float, self.dim)
+                    fsum = ti.Vector.zero(float, fl.dim)
                 self.fdrag[i] = fsum
-                self.adrag[i] = fsum / self.m[i]
+                self.adrag[i] = fsum / fl.m[i]
 
     @ti.kernel
     def _k_drag_water_after(self, dt: float):
@@ -430,77 +447,75 @@ class SoilStep:
         share (1 - n_i) that moves with the soil takes the soil's mean drag acceleration (docs/biot.md).
         Also the momentum check: the sum over all particles of the drag forces `fdrag` (the soil's from
         `_k_drag_soil`) and the largest of them, into `red_drag`."""
-        h = self.h0
-        tot = ti.Vector.zero(float, self.dim)
+        fl = self.fl
+        h = fl.h0
+        tot = ti.Vector.zero(float, fl.dim)
         big = 0.0
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.fmask[i] == 2:
+        ti.loop_config(serialize=fl.serial)
+        for i in range(fl.n):
+            if fl.fmask[i] == 2:
                 f = self.fdrag[i]
                 tot += f
                 ti.atomic_max(big, f.norm())
-            if self.fmask[i] == 1 and self.kind[i] == WATER:
-                fsum = ti.Vector.zero(float, self.dim)
+            if fl.fmask[i] == 1 and fl.kind[i] == WATER:
+                fsum = ti.Vector.zero(float, fl.dim)
                 wsum = 0.0
-                dbar = ti.Vector.zero(float, self.dim)
-                for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
-                    if self.kind[j] != SOIL or self.fmask[j] != 2:
+                dbar = ti.Vector.zero(float, fl.dim)
+                for k in range(fl.grid.nbr_count[i]):
+                    j = fl.grid.nbr[i, k]
+                    if fl.kind[j] != SOIL or fl.fmask[j] != 2:
                         continue
                     fsum += self._pair_drag(i, j, dt)
-                    rij = operators.rel(self.x[i], self.x[j], self.period)
+                    rij = operators.rel(fl.x[i], fl.x[j], fl.period)
                     r2 = rij.dot(rij)
                     if r2 < 4.0 * h * h:
-                        wij = kernels.w(ti.sqrt(r2), h, self.dim) * self.m[j] / self.rho[j]
+                        wij = kernels.w(ti.sqrt(r2), h, fl.dim) * fl.m[j] / fl.rho[j]
                         wsum += wij
                         dbar += wij * self.adrag[j]
-                ad = self.adrag[i] + fsum / self.m[i]
+                ad = self.adrag[i] + fsum / fl.m[i]
                 if wsum > 0.0:
                     ad += (1.0 - self.wmix[i][0]) * dbar / wsum
                 self.fdrag[i] = fsum
                 self.adrag[i] = ad
                 tot += fsum
                 ti.atomic_max(big, fsum.norm())
-        out = ti.Vector.zero(float, self.dim + 1)
-        for d in ti.static(range(self.dim)):
+        out = ti.Vector.zero(float, fl.dim + 1)
+        for d in ti.static(range(fl.dim)):
             out[d] = tot[d]
-        out[self.dim] = big
+        out[fl.dim] = big
         self.red_drag[None] = out
 
     # ------------------------------------------------------------------ host side
-    def _soil_forces(self, dt: float):
-        self._k_soil_forces(dt)
+    def forces(self, dt: float):
+        fl = self.fl
+        self._k_forces(dt)
         r = self.red_soil[None].to_numpy()
         self.red_s = r
         if r[4] > 0:
-            raise guard.non_finite_error(self.step_count, self.time, int(r[4]), int(r[5]),
+            raise guard.non_finite_error(fl.step_count, fl.time, int(r[4]), int(r[5]),
                                          "soil position, velocity, density or stress")
-        self.last["kinetic_energy"] += float(r[0])
-        self.last["max_speed"] = max(self.last["max_speed"], float(r[1]))
-        if self.coupled:
+        fl.last["kinetic_energy"] += float(r[0])
+        fl.last["max_speed"] = max(fl.last["max_speed"], float(r[1]))
+        if fl.coupled:
             self._k_drag_water(dt)
             self._k_drag_soil(dt)
             self._k_drag_water_after(dt)
             r = self.red_drag[None].to_numpy()
-            self.last["drag_sum"] = float(np.linalg.norm(r[:-1]))
-            self.last["drag_max"] = float(r[-1])
+            fl.last["drag_sum"] = float(np.linalg.norm(r[:-1]))
+            fl.last["drag_max"] = float(r[-1])
 
-    def _soil_output(self, order) -> dict:
+    def output(self, order) -> dict:
         """Frame fields of the soil (zero for other particles): effective stress (compression positive),
         mean and shear stress of eq 11-13, accumulated plastic shear strain, ever yielded."""
-        n = self.n
+        fl = self.fl
+        n = fl.n
         sig = self.sig.to_numpy()[:n][order]
-        kind = self.kind.to_numpy()[order]
+        kind = fl.kind.to_numpy()[order]
         sig[kind != SOIL] = 0.0
-        d = self.dim
+        d = fl.dim
         p = np.trace(sig, axis1=1, axis2=2) / d
         dev = sig - p[:, None, None] * np.eye(d)
         tau = np.sqrt(0.5 * np.einsum("nij,nij->n", dev, dev))
         eps_p = self.eps_p.to_numpy()[:n][order]
         return {"effective_stress": sig, "mean_stress": p, "shear_stress": tau, "plastic_strain": eps_p,
                 "yielded": eps_p > 0.0}
-
-    def soil_sound_speed(self, p: float) -> float:
-        """P-wave speed of the soil at mean effective stress p (m/s)."""
-        e = soil.youngs_modulus_np(p, self.e0, self.p_ref, self.m_exp, self.p_floor)
-        return math.sqrt(self.m_fac * float(e) / self.rho_sl)

@@ -45,7 +45,7 @@ from .. import guard
 from ..backend import is_f64
 from ..contract import DT_CFL, DT_FORCE, DT_VISCOUS
 from ..scene import AIR, SOIL, WALL, WATER
-from ..sph import kernels, operators
+from ..sph import kernels, operators, walls
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
 from ..sph.solver_common import SolverCommon
 from ..sph.wall_motion import WallMotion
@@ -53,7 +53,7 @@ from ..switches import Switches
 from . import eos, terms
 from .inflow import Inflow, activate
 from .initial import initial_state
-from .soil_step import SoilStep
+from .soil_step import SoilPasses
 
 log = logging.getLogger("taichi_sph")
 
@@ -71,7 +71,7 @@ SERIAL_BELOW = 2000
 
 
 @ti.data_oriented
-class WCSPHSolver(SoilStep, SolverCommon):
+class WCSPHSolver(SolverCommon):
     """State and step of mode `wcsph_biot` for water and air. Built from a validated Config and a Scene."""
 
     #: per-step diagnostics this solver reports (run.py adds time, dt, wall_seconds, dt_limit)
@@ -143,7 +143,9 @@ class WCSPHSolver(SoilStep, SolverCommon):
             nus += [self.nu_a, (self.rho_a * self.nu_a + self.rho_w * self.nu_w) / (2.0 * self.rho_a)]
         self.nu_max = max(nus) if nus else 0.0
 
-        self._soil_setup(cfg, scene)
+        self.n_soil = scene.count(SOIL)
+        self.has_soil = sw.soil
+        self.coupled = sw.soil_water  # pore pressure and drag
         if self.coupled:  # the drag's momentum check (soil_step.py)
             self.diagnostic_names = (*self.diagnostic_names, "drag_sum", "drag_max")
 
@@ -188,15 +190,16 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.h = ti.field(float, n)
         self.m = ti.field(float, n)
         self.wdepth = ti.field(float, n)
-        self.wnum = ti.field(float, n)
-        self.wden = ti.field(float, n)
         self.kind = ti.field(ti.i32, n)
         self.ids = ti.field(ti.i32, n)
         self.active = ti.field(ti.i32, n)
         self.fmask = ti.field(ti.i32, n)
         self.particle_fields = [self.x, self.v, self.a, self.xs, self.rate, self.normal, self.rho, self.p,
                                 self.h, self.m, self.wdepth, self.kind, self.ids, self.active]
-        self._soil_fields(n)
+        # soil state and passes (soil_step.py); its fields are one element long in a scene without soil
+        self.soil = SoilPasses(self, cfg, scene)
+        self.particle_fields += self.soil.particle_fields
+        self.run_attrs = dict(self.soil.run_attrs)
 
         init = initial_state(cfg, scene, self.materials)
         self.np_fp = np.float64 if is_f64() else np.float32
@@ -232,11 +235,12 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.particle_fields += self.motion.fields()
         self.initial_density = init["density"]
         if self.has_soil:
-            self.sig.from_numpy(init["stress"].astype(f))
+            self.soil.sig.from_numpy(init["stress"].astype(f))
             if "plastic_strain" in init:  # two-stage run (stage.py)
-                self.eps_p.from_numpy(init["plastic_strain"].astype(f))
+                self.soil.eps_p.from_numpy(init["plastic_strain"].astype(f))
 
         self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.cell, self.max_nb, period=self.period)
+        self.wall_pressure = walls.WallPressure(self, n)
         self.r_list = 0.0  # list radius at the last build
         self.hmax = self.h0
         self.rebuilds = 0
@@ -373,7 +377,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
             if self.fmask[i] >= 1:
                 ai = self.a[i]
                 if ti.static(self.has_soil):
-                    ai += self.adrag[i]
+                    ai += self.soil.adrag[i]
                 vh = self.v[i] + 0.5 * (dt_prev + dt) * ai
                 self.v[i] = vh
                 xn = self.x[i] + dt * vh
@@ -448,38 +452,30 @@ class WCSPHSolver(SoilStep, SolverCommon):
                 self.rho[i] = num / den
                 self._pack_q(i, dt, w1, w2)
 
-    @ti.kernel
-    def _k_wall_pressure(self):
-        """Wall pressure for output: extrapolated from the fluid with hydrostatic correction, P_w =
-        sum_f W_wf (P_f + rho_f g . (x_w - x_f)) / sum_f W_wf (Adami et al. 2012). The step itself
-        needs no wall pressure field: each fluid particle sees a wall particle with its own extrapolated
-        value (see `_k_forces`)."""
-        for i in range(self.n):
-            if self.kind[i] == WALL:
-                self.wnum[i] = 0.0
-                self.wden[i] = 0.0
-        for i in range(self.n):
-            if self.fmask[i] == 1:
-                xi = self.x[i]
-                hi = self.h0
-                if ti.static(self.variable_h):
-                    hi = self.h[i]
-                for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
-                    if self.kind[j] == WALL:
-                        hij = self._h_pair(hi, self.s[j])
-                        r = operators.rel(xi, self.x[j], self.period).norm()
-                        if r < 2.0 * hij:
-                            wij = kernels.w(r, hij, self.dim)
-                            pw = operators.wall_pressure(self.p[i], self.rho[i], self.g, xi - operators.rel(xi, self.x[j], self.period), xi)
-                            ti.atomic_add(self.wnum[j], wij * pw)
-                            ti.atomic_add(self.wden[j], wij)
-        for i in range(self.n):
-            if self.kind[i] == WALL:
-                pw = 0.0
-                if self.wden[i] > 0.0:
-                    pw = self.wnum[i] / self.wden[i]
-                self.p[i] = pw
+    @ti.func
+    def _wall_source(self, i):
+        """Whether particle i gives the wall particles it sees a pressure (walls.WallPressure): fluid."""
+        return self.fmask[i] == 1
+
+    @ti.func
+    def _wall_pressure_seen(self, i, j):
+        """Kernel weight and pressure that fluid particle i gives wall particle j for output: its own,
+        extrapolated with hydrostatic correction (walls.wall_pressure). The step itself needs no wall
+        pressure field: each fluid particle sees a wall particle with its own extrapolated value (see
+        `_k_pairs`)."""
+        xi = self.x[i]
+        hi = self.h0
+        if ti.static(self.variable_h):
+            hi = self.h[i]
+        hij = self._h_pair(hi, self.s[j])
+        r = operators.rel(xi, self.x[j], self.period).norm()
+        wij = 0.0
+        pw = 0.0
+        if r < 2.0 * hij:
+            wij = kernels.w(r, hij, self.dim)
+            pw = walls.wall_pressure(self.p[i], self.rho[i], self.g, xi - operators.rel(xi, self.x[j], self.period),
+                                     xi)
+        return wij, pw
 
     @ti.kernel
     def _k_pairs(self, dt: float):
@@ -557,8 +553,8 @@ class WCSPHSolver(SoilStep, SolverCommon):
                         # pressure of i extrapolated hydrostatically to it (Neumann condition)
                         db = self.wdepth[j]
                         nrm = self.normal[j]
-                        beta = terms.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
-                        vij = terms.boundary_relative_velocity(vi - self._vel(sj), nrm, beta, self.no_slip)
+                        beta = walls.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
+                        vij = walls.boundary_relative_velocity(vi - self._vel(sj), nrm, beta, self.no_slip)
                         div -= self.vol0 * vij.dot(gw)
                         mj = rhoi * self.vol0
                         # pressure at the wall particle: hydrostatic across the wall, the gradient at i
@@ -601,7 +597,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
                             nuj = self._nu(ti.cast(kj, ti.i32))
                             acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nuj, f_ij) * vij
                 # a_p = A_p + m_wall a_p (the walls' tangential terms carry G_i = -rho_i a_p)
-                acc += operators.wall_mirror_solve(accp, m_wall, hyd_t)
+                acc += walls.wall_mirror_solve(accp, m_wall, hyd_t)
                 self.a[i] = acc
                 self.rate[i] = ti.Vector([div, self.rate[i][0]])
                 rho = rho_n
@@ -636,7 +632,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
                     ti.atomic_min(first_bad, float(self.ids[i]))
             if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if)
                 if self.fmask[i] == 2:
-                    self._soil_stress_at(i, dt)
+                    self.soil.stress_at(i, dt)
         self.red_forces[None] = ti.Vector([ke, vmax, vol, h_over_a, h_over_c, bad, first_bad, hmin, vol_air])
 
     # ------------------------------------------------------------------ step
@@ -690,7 +686,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self._pairs(dt)
         t0 = self._tick("pairs", t0)
         if self.has_soil:
-            self._soil_forces(dt)
+            self.soil.forces(dt)
             self._tick("soil", t0)
         self.dt_prev2 = self.dt_prev
         self.dt_prev = dt
@@ -703,7 +699,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
         self.neighbour_search()
         self._pairs(0.0)
         if self.has_soil:
-            self._soil_forces(0.0)
+            self.soil.forces(0.0)
         return self.last
 
     def propose_dt(self) -> tuple[float, int]:
@@ -717,7 +713,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
         if self.nu_max > 0.0:
             limits[DT_VISCOUS] = ts.viscous * float(r[7]) ** 2 / self.nu_max
         if self.has_soil:
-            rs = self.red_s
+            rs = self.soil.red_s
             limits[DT_CFL] = min(limits[DT_CFL], ts.cfl * float(rs[3]))
             limits[DT_FORCE] = min(limits[DT_FORCE], ts.force * math.sqrt(float(rs[2])))
         which = min(limits, key=limits.get)
@@ -729,7 +725,7 @@ class WCSPHSolver(SoilStep, SolverCommon):
     def fields_by_id(self) -> dict:
         """Per-particle arrays in id order (SPEC 8 frame fields); pressures relative to the ambient."""
         n = self.n
-        self._k_wall_pressure()
+        self.wall_pressure.update()
         ids = self.ids.to_numpy()[:n]
         order = np.empty(n, dtype=np.int64)
         order[ids] = np.arange(n)
@@ -747,25 +743,17 @@ class WCSPHSolver(SoilStep, SolverCommon):
             "active": self.active.to_numpy()[order].astype(bool),
         }
         if self.has_soil:
-            out.update(self._soil_output(order))
+            out.update(self.soil.output(order))
         return out
-
-    def max_speed_bound(self) -> float:
-        if self.cfg.guard.max_speed is not None:
-            return self.cfg.guard.max_speed
-        height = float(self.cfg.tank.size[-1])
-        return 20.0 * math.sqrt(self.g_abs * height) if self.g_abs > 0 else 100.0
 
     # ------------------------------------------------------------------ checkpoints
     #: fields that carry over from one step to the next: leap-frog state, the packed views, positions at
-    #: the last list build; with the Verlet neighbour lists themselves (kept between rebuilds); the soil's
-    #: effective stress, plastic strain, pore pressure, water presence and drag (soil_step.py; one-element
-    #: fields in a scene without soil).
+    #: the last list build; with the Verlet neighbour lists themselves (kept between rebuilds) and the
+    #: soil's own (SoilPasses.state_fields: one-element fields in a scene without soil).
     state_fields = ("x", "v", "a", "xs", "rate", "normal", "x0", "rho", "p", "h", "m", "wdepth", "kind",
-                    "ids", "active", "fmask", "s", "q", "sig", "eps_p", "pore", "phi_w", "adrag", "wall_body",
-                    "wall_origin")
+                    "ids", "active", "fmask", "s", "q", "wall_body", "wall_origin")
     state_scalars = ("step_count", "time", "removed_total", "dt_prev", "dt_prev2", "rates_known", "r_list",
-                     "hmax", "rebuilds", "red", "red_s")
+                     "hmax", "rebuilds", "red")
 
     @property
     def inflow_state(self) -> np.ndarray:
@@ -785,13 +773,19 @@ class WCSPHSolver(SoilStep, SolverCommon):
         """Full state for a checkpoint, {name: numpy array or scalar} (sph/state.py)."""
         from ..sph.state import snapshot
 
-        return snapshot(self, self.state_fields, self.state_scalars, self.grid)
+        out = snapshot(self, self.state_fields, self.state_scalars, self.grid)
+        out.update(snapshot(self.soil, self.soil.state_fields, self.soil.state_scalars))
+        return out
 
     def load_state(self, state: dict) -> None:
         """Continue from a `state()` of a solver built from the same config."""
         from ..sph.state import restore
 
-        restore(self, state, self.state_fields, self.state_scalars, self.grid)
+        soil_keys = (*self.soil.state_fields, *self.soil.state_scalars)
+        restore(self, {k: v for k, v in state.items() if k not in soil_keys}, self.state_fields,
+                self.state_scalars, self.grid)
+        restore(self.soil, {k: v for k, v in state.items() if k in soil_keys}, self.soil.state_fields,
+                self.soil.state_scalars)
 
 
 def prediction_weights(dt: float, dt_prev: float, dt_prev2: float, known: int) -> tuple[float, float]:

@@ -39,27 +39,6 @@ def artificial_viscosity(vij, rij, r2, h_ij, c_ij, rho_ij, alpha, beta, eps):
 
 
 @ti.func
-def boundary_beta(d_b, d_a, beta_max):
-    """beta = min(beta_max, 1 + d_B / d_a) of eq 51: d_B the boundary particle's distance behind the
-    wall surface, d_a the fluid particle's distance in front of it (beta_max when d_a <= 0)."""
-    beta = beta_max
-    if d_a > 0.0:
-        beta = ti.min(beta_max, 1.0 + d_b / d_a)
-    return beta
-
-
-@ti.func
-def boundary_relative_velocity(v_a, n_w, beta, no_slip: ti.template()):
-    """v_a - v_B of eq 50, v_a the fluid velocity relative to the wall (v_a - v_w for a moving wall,
-    sph/wall_motion.py): beta v_a (no-slip, Morris/Takeda), or beta (v_a . n) n for a slip wall (no
-    tangential shear; the normal component as for no-slip)."""
-    out = beta * v_a
-    if ti.static(not no_slip):
-        out = beta * v_a.dot(n_w) * n_w
-    return out
-
-
-@ti.func
 def cohesion(coef, m_j, gw):
     """Pseudo surface tension eq 54: 2 (a / m_i^2) m_j grad_i W_ij with a / m_i^2 = coef = P_c / rho0^2;
     pulls particles of a material towards its bulk."""
