@@ -45,22 +45,29 @@ def features(cfg, scene=None) -> dict:
             "obstacles": len(cfg.obstacles),
             "gravity": cfg.gravity_vector(),
         },
-        "isph": {
-            "alpha": cfg.isph.alpha,
-            "n_surf": cfg.n_surf(),
-            "free_surface_pressure": cfg.isph.free_surface_pressure,
-            "gradient": cfg.isph.gradient,
-            "ppe_solver": cfg.isph.ppe.type,
-            "ppe_tolerance": cfg.isph.ppe.tolerance,
-            "ppe_max_iterations": cfg.isph.ppe.max_iterations,
-        },
         "output": {"path": cfg.output.path, "every": cfg.output.every},
         "probes": {p.name: {"type": p.type, "every": p.every or cfg.output.every} for p in cfg.probes},
         "images": (None if cfg.output.images is None else
                    {"every": cfg.output.images.every, "field": cfg.output.images.field}),
         "switches": sw.report(),
+        **_isph_features(cfg),
         **_wcsph_features(cfg, sw),
     }
+
+
+def _isph_features(cfg) -> dict:
+    """The options of mode isph (its switches are under `switches`)."""
+    if cfg.mode != "isph":
+        return {}
+    return {"isph": {
+        "alpha": cfg.isph.alpha,
+        "n_surf": cfg.n_surf(),
+        "free_surface_pressure": cfg.isph.free_surface_pressure,
+        "gradient": cfg.isph.gradient,
+        "ppe_solver": cfg.isph.ppe.type,
+        "ppe_tolerance": cfg.isph.ppe.tolerance,
+        "ppe_max_iterations": cfg.isph.ppe.max_iterations,
+    }}
 
 
 def _wcsph_features(cfg, sw: Switches) -> dict:

@@ -200,8 +200,8 @@ def build_markers(cfg) -> dict:
     its region's eps0 and D50 and the volume V_j of eq 32 (spacing^dim). A later region replaces the
     markers of earlier ones inside it. Regions that meet the tank run on into its walls by the wall
     thickness. Empty dict when the config has no soil."""
-    soil = cfg.soil
-    if not soil.regions:
+    soil = getattr(cfg, "soil", None)  # porous ground of mode isph
+    if soil is None or not soil.regions:
         return {}
     dim = cfg.dim
     s = soil.marker_spacing or cfg.dx
@@ -352,7 +352,7 @@ def build_scene(cfg) -> Scene:
     position, normal = np.concatenate([position, soil]), np.concatenate([normal, np.zeros_like(soil)])
     kind = np.concatenate([kind, np.full(len(soil), SOIL, np.int8)])
     inflow_rows = []
-    if cfg.inflow:  # reserve water of the river inflow, held out until released (wcsph/inflow.py)
+    if getattr(cfg, "inflow", []):  # reserve water of the river inflow, held out until released (wcsph/inflow.py)
         reserve, rows = inflow_particles(cfg, wall, position[kind != WALL])
         inflow_rows = [[row + len(position) for row in src] for src in rows]
         position, normal = np.concatenate([position, reserve]), np.concatenate([normal, np.zeros_like(reserve)])

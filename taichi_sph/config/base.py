@@ -44,16 +44,3 @@ def inside(lo, hi, size, key):
     for ax, (a, b, s) in enumerate(zip(lo, hi, size)):
         if a < -tol or b > s + tol:
             fail(key, f"lies outside the tank interior [0, {s}] on axis {ax} (min={list(lo)}, max={list(hi)})")
-
-
-def explicit_keys(model, prefix: str) -> list[str]:
-    """Dotted names of the keys set explicitly (in the file, a variant or --set) inside a section."""
-    out = []
-    for name in model.model_fields_set:
-        value = getattr(model, name)
-        if isinstance(value, BaseModel):
-            inner = explicit_keys(value, f"{prefix}.{name}")
-            out.extend(inner or [f"{prefix}.{name}"])
-        else:
-            out.append(f"{prefix}.{name}")
-    return sorted(out)

@@ -28,7 +28,7 @@ _Loader.add_implicit_resolver(
 
 from ..errors import InputError
 from .base import RULE_ERROR
-from .schema import Config
+from .schema import CONFIG, MODE_SECTIONS, Config
 
 
 def parse_overrides(items) -> list[tuple[str, object]]:
@@ -114,7 +114,7 @@ def load_config(path=None, overrides=(), variant: str | None = None, data: dict 
     for key, value in parse_overrides(overrides):
         set_dotted(raw, key, value)
     try:
-        cfg = Config.model_validate(raw)
+        cfg = CONFIG.validate_python(raw)
     except ValidationError as exc:
         raise InputError(format_validation_error(exc, path)) from None
     return cfg
@@ -124,7 +124,11 @@ def format_validation_error(exc: ValidationError, path=None) -> str:
     """One line: the first problem, naming its key, with a count of the others. Problems of a key's own
     type or range come before the cross-field rules (which are reported alone, without the file: the
     first rule that fails, as "config key '<key>': <message>")."""
-    errors = exc.errors()
+    errors = [_untagged(e) for e in exc.errors()]
+    if errors[0].get("type") == "union_tag_invalid":
+        tags = errors[0].get("ctx", {}).get("expected_tags", "")
+        return f"config key 'mode'{f' in {path!r}' if path else ''}: must be one of {tags} " \
+               f"(got {errors[0].get('ctx', {}).get('tag')!r})"
     plain = [e for e in errors if e.get("type") != RULE_ERROR]
     if not plain:
         rule = errors[0]
@@ -135,7 +139,11 @@ def format_validation_error(exc: ValidationError, path=None) -> str:
     first = errors[0]
     key = _loc(first.get("loc", ()))
     kind = first.get("type", "")
-    if kind == "extra_forbidden":
+    other = _other_mode_section(first)
+    if other is not None:
+        key = _first_leaf(key, first.get("input"))
+        msg = f"applies to mode {other} only (mode is {first['mode']})"
+    elif kind == "extra_forbidden":
         msg = "unknown key"
     elif kind == "missing":
         msg = "required key is missing"
@@ -149,6 +157,36 @@ def format_validation_error(exc: ValidationError, path=None) -> str:
     more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
     src = f" in '{path}'" if path else ""
     return f"config key '{key}'{src}: {msg}{more}"
+
+
+def _untagged(error: dict) -> dict:
+    """A validation error of a case with the union's tag (the mode, first in its location) moved from the
+    location to `error["mode"]`."""
+    loc = tuple(error.get("loc", ()))
+    if loc and loc[0] in MODE_SECTIONS:
+        return {**error, "loc": loc[1:], "mode": loc[0]}
+    return error
+
+
+def _other_mode_section(error: dict) -> str | None:
+    """The mode whose own section a case of the other mode set (an unknown top-level key that the other
+    mode accepts), or None."""
+    loc = error.get("loc", ())
+    if error.get("type") != "extra_forbidden" or len(loc) != 1 or "mode" not in error:
+        return None
+    return next((m for m, keys in MODE_SECTIONS.items() if m != error["mode"] and loc[0] in keys), None)
+
+
+def _first_leaf(key: str, value) -> str:
+    """The dotted name of the first key set inside a section given as `value` (the section itself when it
+    holds no keys), or of a list's first item: `wcsph.air.cohesion` for `wcsph: {air: {cohesion: 10}}`,
+    `inflow[0]` for a list of inflows."""
+    while isinstance(value, dict) and value:
+        name, value = next(iter(value.items()))
+        key = f"{key}.{name}"
+    if isinstance(value, list) and value:
+        key = f"{key}[0]"
+    return key
 
 
 def _loc(loc) -> str:
@@ -169,8 +207,6 @@ def resolved_yaml(cfg: Config) -> str:
     return yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
 
 
-#: sections of a resolved config that belong to the other mode
-_OTHER_MODE_SECTIONS = {"isph": ("wcsph", "air"), "wcsph_biot": ("isph", "soil")}
 
 
 def load_run_config(run_path, overrides=()) -> Config:
@@ -186,8 +222,11 @@ def load_run_config(run_path, overrides=()) -> Config:
         raw = None
     if not isinstance(raw, dict):
         raise InputError(f"{run_path}: the run file holds no readable config")
-    # the stored config is fully resolved: it holds the other mode's sections at their defaults, which a
-    # config may not set explicitly
-    for key in _OTHER_MODE_SECTIONS.get(raw.get("mode"), ()):
-        raw.pop(key, None)
+    # a run file written before the case models were split by mode holds the other mode's sections at
+    # their defaults, which a case of this mode does not accept
+    mode = raw.get("mode", "isph")
+    for other, keys in MODE_SECTIONS.items():
+        if other != mode:
+            for key in keys:
+                raw.pop(key, None)
     return load_config(data=raw, overrides=overrides)

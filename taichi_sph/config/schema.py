@@ -6,18 +6,20 @@ walls are built outside it. Validation runs before any Taichi kernel is compiled
 in modules by concern: geometry.py (boxes, the box-or-mound shape, blocks, obstacles, tank), isph.py
 (mode isph: porous ground, PPE), wcsph.py (mode wcsph_biot: equations of state, soil, inflow),
 run_options.py (output, probes, time step, guard, checkpoints), sweep.py (metrics, the sweep file).
-Each cross-field rule is a validator on the model that owns its keys (a section's own rules on the
-section; rules that need dim, the tank or the mode on Config, below). Keys are documented in
-docs/config.md; `taichi-sph schema` prints the JSON Schema.
+A case is `Config`, the union of `ISPHCase` and `WCSPHCase` told apart by `mode` (isph when it is left
+out): each holds the keys every case accepts (`_Case`) and its mode's own sections, so a key of the
+other mode is an error of the schema itself. Each cross-field rule is a validator on the model that owns
+its keys (a section's own rules on the section; rules that need dim, the tank or the mode on the case
+model, its `_rules`). Keys are documented in docs/config.md; `taichi-sph schema` prints the JSON Schema.
 """
 
 from __future__ import annotations
 
-from typing import Literal, Optional, Union
+from typing import Annotated, Literal, Optional, Union
 
-from pydantic import model_validator
+from pydantic import Discriminator, Tag, TypeAdapter, model_validator
 
-from .base import NonNegFloat, PosFloat, PosInt, Strict, explicit_keys, fail
+from .base import NonNegFloat, PosFloat, PosInt, Strict, fail
 from .geometry import (  # noqa: F401  (re-exported: `from taichi_sph.config.schema import ...`)
     Box,
     Obstacle,
@@ -25,6 +27,7 @@ from .geometry import (  # noqa: F401  (re-exported: `from taichi_sph.config.sch
     Shape,
     Tank,
     WaterBlock,
+    check_box,
     check_geometry,
     check_periodic,
     check_tank_room,
@@ -71,9 +74,11 @@ class Fluid(Strict):
     smagorinsky_cs: PosFloat = 0.2
 
 
-class Config(Strict):
+class _Case(Strict):
+    """Keys every case accepts, whatever its mode; `ISPHCase` and `WCSPHCase` add their mode's own."""
+
     #: solver: isph (incompressible, PPE) or wcsph_biot (weakly compressible mixture)
-    mode: Literal["isph", "wcsph_biot"] = "isph"
+    mode: str = "isph"
     #: number of space dimensions
     dim: Literal[2, 3] = 2
     #: initial particle spacing (m)
@@ -106,16 +111,6 @@ class Config(Strict):
     water: list[WaterBlock] = []
     #: solid blocks of wall particles inside the tank (m)
     obstacles: list[Obstacle] = []
-    #: porous ground (mode isph): soil-marker regions and drag constants
-    soil: Soil = Soil()
-    #: options of mode isph
-    isph: ISPH = ISPH()
-    #: air blocks (m, fields as for `water`), mode wcsph_biot; they displace the water they overlap
-    air: list[Box] = []
-    #: options of mode wcsph_biot
-    wcsph: WCSPH = WCSPH()
-    #: soil particle blocks (m), mode wcsph_biot: a lattice of spacing dx overlapping any water block
-    soil_blocks: list[SoilBlock] = []
     #: adaptive time-step limits (dt = auto)
     timestep: TimeStep = TimeStep()
     #: neighbour-list capacity
@@ -128,13 +123,14 @@ class Config(Strict):
     checkpoint: Checkpoint = Checkpoint()
     #: numbers computed from the finished run, gathered by `taichi-sph sweep` (one column each)
     metrics: list[Metric] = []
-    #: river inflow (mode wcsph_biot): source boxes of water released at a prescribed rate
-    inflow: list[InflowSource] = []
+
+    #: the cross-field rules of the mode, in order (each raises base.fail naming the key)
+    _rules = ()
 
     @model_validator(mode="after")
     def _cross_field_rules(self):
         """The rules that need keys of more than one section (after every section's own rules)."""
-        for rule in CROSS_FIELD_RULES:
+        for rule in self._rules:
             rule(self)
         return self
 
@@ -149,19 +145,45 @@ class Config(Strict):
     def wall_layers(self) -> int:
         return self.tank.wall_layers or 3
 
-    def n_surf(self) -> int:
-        if self.isph.n_surf is not None:
-            return self.isph.n_surf
-        return 48 if self.dim == 3 else 17
-
     def max_neighbours(self) -> int:
         if self.neighbours.max is not None:
             return self.neighbours.max
         return 160 if self.dim == 3 else 64
 
+
+class ISPHCase(_Case):
+    """A case of mode isph: water over and through porous ground given by soil markers (seed 000)."""
+
+    #: solver: isph (incompressible, PPE) or wcsph_biot (weakly compressible mixture)
+    mode: Literal["isph"] = "isph"
+    #: porous ground: soil-marker regions and drag constants
+    soil: Soil = Soil()
+    #: options of mode isph
+    isph: ISPH = ISPH()
+
+    def n_surf(self) -> int:
+        if self.isph.n_surf is not None:
+            return self.isph.n_surf
+        return 48 if self.dim == 3 else 17
+
+
+class WCSPHCase(_Case):
+    """A case of mode wcsph_biot: water, air and soil as overlapping particle sets (seed 002)."""
+
+    #: solver: isph (incompressible, PPE) or wcsph_biot (weakly compressible mixture)
+    mode: Literal["wcsph_biot"]
+    #: air blocks (m, fields as for `water`); they displace the water they overlap
+    air: list[Box] = []
+    #: options of mode wcsph_biot
+    wcsph: WCSPH = WCSPH()
+    #: soil particle blocks (m): a lattice of spacing dx overlapping any water block
+    soil_blocks: list[SoilBlock] = []
+    #: river inflow: source boxes of water released at a prescribed rate
+    inflow: list[InflowSource] = []
+
     def expected_speed(self) -> float:
-        """Largest flow speed expected in mode wcsph_biot (m/s): the key, or the free-fall speed from the
-        highest water or air block top."""
+        """Largest flow speed expected (m/s): the key, or the free-fall speed from the highest water or air
+        block top."""
         if self.wcsph.water.expected_speed is not None:
             return self.wcsph.water.expected_speed
         g = sum(c * c for c in self.gravity_vector()) ** 0.5
@@ -174,7 +196,7 @@ class Config(Strict):
         dry weight of the highest soil top, (1 - n) rho_s |g| top (an upper bound of M where E grows with
         p); None without soil or with a rigid skeleton (`wcsph.soil.fixed`), which stores no water."""
         sp = self.wcsph.soil
-        if self.mode != "wcsph_biot" or not self.soil_blocks or not self.water or sp.fixed:
+        if not self.soil_blocks or not self.water or sp.fixed:
             return None
         g = sum(c * c for c in self.gravity_vector()) ** 0.5
         top = max(blk.bounds(self.dim, self.tank.size)[1][-1] for blk in self.soil_blocks)
@@ -187,46 +209,62 @@ class Config(Strict):
         return 0.0 if m is None else (PORE_WATER_STIFFNESS * m / self.fluid.density) ** 0.5
 
     def sound_speed(self) -> float:
-        """Sound speed c0 of the water equation of state (m/s), mode wcsph_biot: the key, or the larger of
-        speed_factor x expected_speed and, with soil, `pore_water_speed`."""
+        """Sound speed c0 of the water equation of state (m/s): the key, or the larger of speed_factor x
+        expected_speed and, with soil, `pore_water_speed`."""
         if self.wcsph.water.sound_speed is not None:
             return self.wcsph.water.sound_speed
         return max(self.wcsph.water.speed_factor * self.expected_speed(), self.pore_water_speed())
 
 
-def check_mode_sections(cfg: Config) -> None:
-    """Options of the other mode are errors rather than silently ignored."""
-    if cfg.mode == "wcsph_biot":
-        keys = explicit_keys(cfg.isph, "isph") + explicit_keys(cfg.soil, "soil")
-        if keys:
-            fail(keys[0], "applies to mode isph only (mode is wcsph_biot)")
-        for k, block in enumerate(cfg.water):
-            if block.porosity != 1.0:
-                fail(f"water[{k}].porosity", "applies to mode isph only (mode is wcsph_biot)")
-        if cfg.fluid.turbulence != "none":
-            fail("fluid.turbulence", f"{cfg.fluid.turbulence} is available in mode isph only")
-        c0, u = cfg.sound_speed(), cfg.expected_speed()
-        if cfg.wcsph.water.sound_speed is not None and c0 < 10.0 * u:
-            fail("wcsph.water.sound_speed", f"{c0:g} m/s is below 10 x the expected speed {u:.4g} m/s "
-                 "(wcsph.water.expected_speed); density would vary by more than 1 %")
-    else:
-        keys = explicit_keys(cfg.wcsph, "wcsph")
-        if keys:
-            fail(keys[0], f"applies to mode wcsph_biot only (mode is {cfg.mode})")
-        if cfg.air:
-            fail("air", f"air blocks need mode wcsph_biot (mode is {cfg.mode})")
-        for k, block in enumerate(cfg.water):
-            if block.start_head is not None:
-                fail(f"water[{k}].start_head", f"applies to mode wcsph_biot only (mode is {cfg.mode})")
-            if block.inside_soil:
-                fail(f"water[{k}].inside_soil", f"applies to mode wcsph_biot only (mode is {cfg.mode})")
-            if block.outside_soil:
-                fail(f"water[{k}].outside_soil", f"applies to mode wcsph_biot only (mode is {cfg.mode})")
+def check_isph_water(cfg: ISPHCase) -> None:
+    """At least one water block; the keys of water blocks that only mode wcsph_biot reads are errors."""
+    if not cfg.water:
+        fail("water", "needs at least one water block (mode wcsph_biot may have soil blocks instead)")
+    for k, block in enumerate(cfg.water):
+        for key in ("start_head", "inside_soil", "outside_soil"):
+            if getattr(block, key) not in (None, False):
+                fail(f"water[{k}].{key}", f"applies to mode wcsph_biot only (mode is {cfg.mode})")
 
 
-#: the rules Config runs, in this order (each raises base.fail naming the key)
-CROSS_FIELD_RULES = (check_geometry, check_ground, check_probes, check_images, check_metrics, check_periodic,
-                     check_tank_room, check_soil_blocks, check_mode_sections, check_times)
+def check_wcsph_fluids(cfg: WCSPHCase) -> None:
+    """Air blocks inside the tank; no porosity or turbulence (mode isph only); a sound speed given
+    explicitly at least 10 x the expected speed."""
+    for k, box in enumerate(cfg.air):
+        check_box(box, cfg.dim, cfg.tank.size, f"air[{k}]")
+    for k, block in enumerate(cfg.water):
+        if block.porosity != 1.0:
+            fail(f"water[{k}].porosity", "applies to mode isph only (mode is wcsph_biot)")
+    if cfg.fluid.turbulence != "none":
+        fail("fluid.turbulence", f"{cfg.fluid.turbulence} is available in mode isph only")
+    c0, u = cfg.sound_speed(), cfg.expected_speed()
+    if cfg.wcsph.water.sound_speed is not None and c0 < 10.0 * u:
+        fail("wcsph.water.sound_speed", f"{c0:g} m/s is below 10 x the expected speed {u:.4g} m/s "
+             "(wcsph.water.expected_speed); density would vary by more than 1 %")
+
+
+ISPHCase._rules = (check_geometry, check_ground, check_probes, check_images, check_metrics, check_periodic,
+                   check_tank_room, check_isph_water, check_times)
+WCSPHCase._rules = (check_geometry, check_probes, check_images, check_metrics, check_periodic, check_tank_room,
+                    check_wcsph_fluids, check_soil_blocks, check_times)
+
+#: the sections each mode alone has (a case of the other mode may not set them)
+MODE_SECTIONS = {"isph": ("soil", "isph"), "wcsph_biot": ("air", "wcsph", "soil_blocks", "inflow")}
+#: the case model of each mode
+CASES = {"isph": ISPHCase, "wcsph_biot": WCSPHCase}
+
+
+def _mode_of(value) -> str | None:
+    """The discriminator of Config: a case's `mode` (isph when the key is left out)."""
+    if isinstance(value, dict):
+        return value.get("mode", "isph")
+    return getattr(value, "mode", None)
+
+
+#: a case file: ISPHCase or WCSPHCase, told apart by `mode`
+Config = Annotated[Union[Annotated[ISPHCase, Tag("isph")], Annotated[WCSPHCase, Tag("wcsph_biot")]],
+                   Discriminator(_mode_of)]
+#: validates a case (`CONFIG.validate_python(data)`) and gives its JSON Schema
+CONFIG = TypeAdapter(Config)
 
 
 #: JSON Schema dialect of `json_schema` (pydantic writes draft 2020-12)
@@ -237,4 +275,4 @@ def json_schema() -> dict:
     """The JSON Schema of a case file (`taichi-sph schema`, docs/config.schema.json), for editors that
     complete and check YAML. It holds each key's type, range and default; the cross-field rules (lengths
     equal to dim, blocks inside the tank, options of the other mode) are checked by `taichi-sph --check`."""
-    return {"$schema": JSON_SCHEMA_DIALECT, **Config.model_json_schema(), "title": "taichi-sph case file"}
+    return {"$schema": JSON_SCHEMA_DIALECT, **CONFIG.json_schema(), "title": "taichi-sph case file"}

@@ -288,19 +288,16 @@ class WCSPH(Strict):
 
 
 def check_soil_blocks(cfg) -> None:
-    """Soil blocks need mode wcsph_biot, `dim` values and must lie in the tank; water blocks are needed
-    unless there is soil; water inside soil needs soil to fill; inflows need mode wcsph_biot and lie in
-    the tank."""
-    if not cfg.water and not (cfg.mode == "wcsph_biot" and cfg.soil_blocks):
+    """Soil blocks have `dim` values and lie in the tank; water blocks are needed unless there is soil;
+    water inside soil needs soil to fill; inflows lie in the tank (a case of mode wcsph_biot)."""
+    if not cfg.water and not cfg.soil_blocks:
         fail("water", "needs at least one water block (mode wcsph_biot may have soil blocks instead)")
-    if cfg.soil_blocks and cfg.mode != "wcsph_biot":
-        fail("soil_blocks", f"soil particles need mode wcsph_biot (mode is {cfg.mode}; mode isph has `soil`)")
     for k, blk in enumerate(cfg.soil_blocks):
         blk.check_in_tank(cfg.dim, cfg.tank.size, f"soil_blocks[{k}]")
     for k, block in enumerate(cfg.water):
-        if block.outside_soil and cfg.mode == "wcsph_biot" and not cfg.soil_blocks:
+        if block.outside_soil and not cfg.soil_blocks:
             fail(f"water[{k}].outside_soil", "needs soil_blocks (the water is kept out of them)")
-        if block.inside_soil and cfg.mode == "wcsph_biot":
+        if block.inside_soil:
             if not cfg.soil_blocks:
                 fail(f"water[{k}].inside_soil", "needs soil_blocks (the water fills their pores)")
             bounds = [blk.bounds(cfg.dim, cfg.tank.size) for blk in cfg.soil_blocks]
@@ -308,8 +305,6 @@ def check_soil_blocks(cfg) -> None:
                        for slo, shi in bounds):
                 fail(f"water[{k}].inside_soil", "the block overlaps no soil block (no pore to fill)")
     for k, src in enumerate(cfg.inflow):
-        if cfg.mode != "wcsph_biot":
-            fail(f"inflow[{k}]", f"an inflow needs mode wcsph_biot (mode is {cfg.mode})")
         check_box(src, cfg.dim, cfg.tank.size, f"inflow[{k}]")
         if src.level_probe is not None:
             probe = next((p for p in cfg.probes if p.name == src.level_probe), None)
