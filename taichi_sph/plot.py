@@ -59,14 +59,7 @@ def plot_diagnostics(run, out: Path) -> Path | None:
             ax.set_yscale("log")
         ax.set_ylabel(label, fontsize=8)
         ax.grid(True, alpha=0.3)
-    for ax in axes:
-        ax.tick_params(labelbottom=True, labelsize=8)
-        ax.set_xlabel("time [s]", fontsize=8)
-    fig.suptitle(f"{run.path.name}: diagnostics per step", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
-    return out
+    return _finish(plt, fig, axes, f"{run.path.name}: diagnostics per step", out)
 
 
 def plot_probes(run, out: Path) -> Path | None:
@@ -84,10 +77,15 @@ def plot_probes(run, out: Path) -> Path | None:
             ax.plot(t, v, marker=".", ms=3, lw=1.0)
         ax.set_ylabel(f"{name} [{units.get(name, '1')}]", fontsize=8)
         ax.grid(True, alpha=0.3)
+    return _finish(plt, fig, axes, f"{run.path.name}: probes", out)
+
+
+def _finish(plt, fig, axes, title: str, out: Path) -> Path:
+    """Time axes labelled on every panel, the title, and the figure written to `out` and closed."""
     for ax in axes:
         ax.tick_params(labelbottom=True, labelsize=8)
         ax.set_xlabel("time [s]", fontsize=8)
-    fig.suptitle(f"{run.path.name}: probes", fontsize=10)
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=100)
     plt.close(fig)

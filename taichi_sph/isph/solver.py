@@ -14,6 +14,9 @@ One step (projection method, eqs 18-31), all particles water or wall:
 4. corrector (eq 20): v = v* - k grad P, gradient eq 12 with kernel-gradient correction by default;
    walls carry P_i hydrostatic across the wall and the water's own gradient along its face.
 5. advection x += dt v / eps (pore velocity) or dt v (Darcy velocity, `advection: darcy`).
+
+The kernels loop over each particle's neighbours (`_pair`; `_volume` and `_mass_and_density` say what a
+water or wall neighbour stands for) and call the terms of terms.py; walls are sph/walls.py's.
 """
 
 
@@ -36,6 +39,7 @@ from ..sph.grid import NeighbourGrid, NeighbourOverflowError
 from ..sph.solver_common import SolverCommon
 from ..sph.wall_motion import WallMotion
 from . import porosity as _porosity
+from . import terms
 
 log = logging.getLogger("taichi_sph")
 
@@ -288,6 +292,34 @@ class ISPHSolver(SolverCommon):
         """Neighbour j takes part in the sums: water, or a wet wall particle."""
         return self.kind[j] != WALL or self.wet[j] == 1
 
+    @ti.func
+    def _pair(self, i, k, xi):
+        """The k-th listed neighbour j of particle i (at xi), rij = x_i - x_j (minimum image), r = |rij|."""
+        j = self.grid.nbr[i, k]
+        rij = operators.rel(xi, self.x[j], self.period)
+        return j, rij, rij.norm()
+
+    @ti.func
+    def _volume(self, j):
+        """Bulk volume V_j a neighbour stands for: m / (eps_j rho_w) for water (a water particle in ground
+        fills 1 / eps_j lattice cells), the lattice cell dx^d = m / rho_w for a wall particle."""
+        vj = self.mass / self.rho_w
+        if self.kind[j] == WATER:
+            vj = self.mass / (self.eps[j] * self.rho_w)
+        return vj
+
+    @ti.func
+    def _mass_and_density(self, i, j):
+        """Mass m_j and reference density rho_bar_j neighbour j carries in i's momentum and PPE sums: its
+        own (m, eps_j rho_w) for water; a wall particle stands for water at i's porosity (eps_i m,
+        eps_i rho_w), the seed's virtual-marker idea."""
+        m_j = self.eps[i] * self.mass
+        rb_j = self.eps[i] * self.rho_w
+        if self.kind[j] != WALL:
+            m_j = self.mass
+            rb_j = self.eps[j] * self.rho_w
+        return m_j, rb_j
+
     @ti.kernel
     def _k_density(self):
         """<rho_i> (eq 27), free-surface flag (eq 34) and the kernel-gradient correction L_i."""
@@ -321,13 +353,13 @@ class ISPHSolver(SolverCommon):
                         if ti.static(self.n_surf > 0):
                             wall_count = n_surf / self.n_surf
                 for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
+                    j, rij, r = self._pair(i, k, xi)
                     if not self._present(j):
                         continue
                     # a wall particle stands for water of mass eps_i m at the wall lattice: volume dx^d
                     share = self.eps[i]
                     count = wall_count
-                    vj = self.mass / self.rho_w
+                    vj = self._volume(j)
                     if self.kind[j] == WATER:
                         n_water += 1
                         # bulk volume m / (eps_j rho_w) in units of i's own: a water particle in ground
@@ -336,14 +368,11 @@ class ISPHSolver(SolverCommon):
                         # to counting particles where eps is uniform)
                         share = self.eps[i] / self.eps[j]
                         count = share
-                        vj = self.mass / (self.eps[j] * self.rho_w)
                     nb += count
-                    rij = operators.rel(xi, self.x[j], self.period)
-                    r = rij.norm()
                     wsum += share * kernels.w(r, self.h, self.dim)
                     if r > 0.0:
                         gw = kernels.grad_w(rij, r, self.h, self.dim)
-                        M += vj * (-rij).outer_product(gw)
+                        M += terms.moment_pair(vj, rij, gw)
                         if ti.static(self.shifting):
                             ratio = kernels.w(r, self.h, self.dim) / w_ref
                             gc += vj * (1.0 + 0.2 * ratio**4) * gw
@@ -472,20 +501,16 @@ class ISPHSolver(SolverCommon):
                 n_water = 0
                 gsum = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
+                    j, rij, r = self._pair(i, k, xi)
                     if not self._present(j):
                         continue
-                    vj = self.mass / self.rho_w
                     if self.kind[j] == WATER:
-                        vj = self.mass / (self.eps[j] * self.rho_w)
                         n_water += 1
                         if self.eps[j] < 1.0:
                             near = True
                     plain += 1.0
-                    rij = operators.rel(xi, self.x[j], self.period)
-                    r = rij.norm()
                     if r > 0.0:
-                        gsum += vj * kernels.grad_w(rij, r, self.h, self.dim)
+                        gsum += self._volume(j) * kernels.grad_w(rij, r, self.h, self.dim)
                 if near:
                     candidate = self.free[i] == 1
                     if self.eps[i] >= 1.0 and plain < self.n_surf:
@@ -497,10 +522,9 @@ class ISPHSolver(SolverCommon):
                         if n_water > self.dim:
                             n_out = -gsum / gn
                             for k in range(self.grid.nbr_count[i]):
-                                j = self.grid.nbr[i, k]
+                                j, rij, r = self._pair(i, k, xi)
                                 if self._present(j):
-                                    d = -operators.rel(xi, self.x[j], self.period)
-                                    if d.dot(n_out) >= self.cone_cos * d.norm():
+                                    if -rij.dot(n_out) >= self.cone_cos * r:
                                         is_free = 0
                     # draining ground: scattered pore water with air between, a deficit of number
                     # density with no empty cone (isph.ground_surface_density)
@@ -542,25 +566,24 @@ class ISPHSolver(SolverCommon):
                 vi = self.v[i]
                 G = ti.Matrix.zero(float, self.dim, self.dim)
                 for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
+                    j, rij, r = self._pair(i, k, xi)
                     if not self._present(j):
                         continue
-                    rij = operators.rel(xi, self.x[j], self.period)
-                    r = rij.norm()
                     vj = self.v[j]
-                    vol = self.mass / self.rho_w
                     if self.kind[j] == WALL:
                         vj = walls.mirror_velocity(vi, self.v[j], self.normal[j], self.no_slip)
-                    else:
-                        vol = self.mass / (self.eps[j] * self.rho_w)
                     if r > 0.0:
-                        G += vol * (vj - vi).outer_product(kernels.grad_w(rij, r, self.h, self.dim))
-                G = G @ self.L[i].transpose()
-                S = 0.5 * (G + G.transpose())
-                s2 = 0.0
-                for a, c in ti.static(ti.ndrange(self.dim, self.dim)):
-                    s2 += S[a, c] * S[a, c]
-                self.nu_t[i] = self.cs_delta2 * ti.sqrt(2.0 * s2)
+                        gw = kernels.grad_w(rij, r, self.h, self.dim)
+                        G += self._volume(j) * (vj - vi).outer_product(gw)
+                self.nu_t[i] = terms.smagorinsky_viscosity(self.cs_delta2, G @ self.L[i].transpose())
+
+    @ti.func
+    def _eddy_viscosity(self, i):
+        """nu_T of particle i (eq 3), 0 without turbulence."""
+        nu_t = 0.0
+        if ti.static(self.turbulence):
+            nu_t = self.nu_t[i]
+        return nu_t
 
     @ti.kernel
     def _k_predictor(self):
@@ -576,40 +599,30 @@ class ISPHSolver(SolverCommon):
                 vi = self.v[i]
                 eps_i = self.eps[i]
                 rb_i = eps_i * self.rho_w
-                nu_i = self.nu / eps_i
-                if ti.static(self.turbulence):
-                    nu_i += self.nu_t[i] / eps_i
+                nu_i = terms.effective_viscosity(self.nu, self._eddy_viscosity(i), eps_i)
                 lap = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
+                    j, rij, r = self._pair(i, k, xi)
                     if not self._present(j):
                         continue
-                    rij = operators.rel(xi, self.x[j], self.period)
-                    r = rij.norm()
                     if r > 0.0:
                         f = operators.laplacian_weight(r, self.h, self.eta2, self.dim)
                         vj = self.v[j]
-                        rb_j = rb_i
                         nu_j = nu_i
-                        m_j = eps_i * self.mass
+                        m_j, rb_j = self._mass_and_density(i, j)
                         if self.kind[j] == WALL:
                             vj = walls.mirror_velocity(vi, self.v[j], self.normal[j], self.no_slip)
                         else:
-                            m_j = self.mass
-                            rb_j = self.eps[j] * self.rho_w
-                            nu_j = self.nu / self.eps[j]
-                            if ti.static(self.turbulence):
-                                nu_j += self.nu_t[j] / self.eps[j]
-                        lap += operators.variable_laplacian_pair(m_j, rb_i, nu_i, rb_j, nu_j, f) * (vi - vj)
+                            nu_j = terms.effective_viscosity(self.nu, self._eddy_viscosity(j), self.eps[j])
+                        lap += terms.viscous_pair(m_j, rb_i, nu_i, rb_j, nu_j, f, vi, vj)
                 c = eps_i * dt
                 drag = 1.0
                 if ti.static(self.porous):
                     if eps_i < 1.0:
                         c /= _porosity.inertia_coefficient(eps_i)
-                        a = _porosity.linear_drag(eps_i, self.nu, self.d50[i], self.alpha_c)
-                        b = _porosity.quadratic_drag(eps_i, self.d50[i], self.beta_c)
-                        drag = 1.0 + c * (a + b * vi.norm())
-                self.vstar[i] = (vi + c * (self.g / eps_i + lap)) / drag
+                        drag = terms.drag_factor(eps_i, self.nu, self.d50[i], vi.norm(), c, self.alpha_c,
+                                                 self.beta_c)
+                self.vstar[i] = terms.predicted_velocity(vi, c, self.g, eps_i, lap, drag)
                 self.kcoef[i] = c / (drag * rb_i)
                 if ti.static(self.porous):
                     self.drag[i] = drag
@@ -667,14 +680,13 @@ class ISPHSolver(SolverCommon):
                     diag = 0.0
                     rhs = 0.0
                     for k in range(self.grid.nbr_count[i]):
-                        j = self.grid.nbr[i, k]
+                        j, rij, r = self._pair(i, k, xi)
                         if not self._present(j):
                             continue
-                        rij = operators.rel(xi, self.x[j], self.period)
-                        r = rij.norm()
                         if r > 0.0:
                             gw = kernels.grad_w(rij, r, self.h, self.dim)
                             f = operators.laplacian_weight(r, self.h, self.eta2, self.dim)
+                            m_j, rb_j = self._mass_and_density(i, j)
                             if self.kind[j] == WALL:
                                 # impermeability only: the wall's image reverses the velocity normal to it
                                 # (relative to the wall), slip or no-slip; the tangential no-slip condition
@@ -682,13 +694,11 @@ class ISPHSolver(SolverCommon):
                                 # wall moving along its face put a source 2 m v_w . grad W into every row
                                 # whose wall neighbours are not symmetric about it (near a free surface)
                                 vj = walls.mirror_velocity(vi, self.v[j], self.normal[j], False)
-                                m_w = eps_i * self.mass
-                                div += m_w * (vj - vi).dot(gw)
+                                div += terms.divergence_pair(m_j, vi, vj, gw)
                             else:
                                 vj = self.vstar[j] - self.kcoef[j] * self.rho_w * self.g
-                                div += self.mass * (vj - vi).dot(gw)
-                                rb_j = self.eps[j] * self.rho_w
-                                K = -operators.variable_laplacian_pair(self.mass, rb_i, k_i, rb_j, self.kcoef[j], f)
+                                div += terms.divergence_pair(m_j, vi, vj, gw)
+                                K = terms.ppe_pair(m_j, rb_i, k_i, rb_j, self.kcoef[j], f)
                                 diag += K
                                 rhs += K * self.rho_w * self.g.dot(rij)  # phi_i - phi_j
                                 if self.free[j] == 1 or self.solve_mask[j] == 0:
@@ -699,7 +709,7 @@ class ISPHSolver(SolverCommon):
                     rho_ref = rb_i
                     if ti.static(self.porous):
                         rho_ref *= self.rest_fill[i]
-                    stab = self.alpha * eps_i * (rho_ref - self.rho_n[i]) / (rho_ref * dt)
+                    stab = terms.density_stabilisation(self.alpha, eps_i, rho_ref, self.rho_n[i], dt)
                     if ti.static(self.porous):
                         # the density error is relaxed through the same drag as the flow: without the
                         # 1 / D, fine sand (D ~ 300 at D50 = 0.1 mm) turns a 1 % density error into
@@ -753,16 +763,14 @@ class ISPHSolver(SolverCommon):
                 M = ti.Matrix.zero(float, self.dim, self.dim)
                 s = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
+                    j, rij, r = self._pair(i, k, xi)
                     if self.kind[j] == WALL:
                         near_wall = 1
                     elif self.solve_mask[j] == 1:
-                        rij = operators.rel(xi, self.x[j], self.period)
-                        r = rij.norm()
                         if r > 0.0:
                             gw = kernels.grad_w(rij, r, self.h, self.dim)
-                            vj = self.mass / (self.eps[j] * self.rho_w)
-                            M += vj * (-rij).outer_product(gw)
+                            vj = self._volume(j)
+                            M += terms.moment_pair(vj, rij, gw)
                             s += vj * (self.p[j] - pi) * gw
                 if near_wall == 1:
                     # corrected wherever the water spans every direction: a corner of the tank leaves a
@@ -812,26 +820,19 @@ class ISPHSolver(SolverCommon):
                 rb_i = self.eps[i] * self.rho_w
                 gp = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
+                    j, rij, r = self._pair(i, k, xi)
                     if not self._present(j):
                         continue
-                    rij = operators.rel(xi, self.x[j], self.period)
-                    r = rij.norm()
                     if r > 0.0:
                         gw = kernels.grad_w(rij, r, self.h, self.dim)
-                        pj = self.p[j]
-                        rb_j = rb_i
-                        m_j = self.eps[i] * self.mass
-                        if self.kind[j] != WALL:
-                            rb_j = self.eps[j] * self.rho_w
-                            m_j = self.mass
+                        m_j, rb_j = self._mass_and_density(i, j)
                         if ti.static(self.grad_mode == GRAD_SYMMETRIC):
                             # eq 13 measured from the free surface's pressure p_s: the form is exact for a
                             # constant only on a full support, so with P itself a drop (every particle at
                             # p_s) pushed itself apart and a particle beside a wall was pushed off it
-                            gp += m_j * (pj / (rb_j * rb_j) + pi / (rb_i * rb_i)) * gw
+                            gp += terms.pressure_gradient_symmetric(m_j, rb_i, rb_j, pi, self.p[j], gw)
                         else:
-                            gp += m_j / rb_j * (pj - pi) * gw
+                            gp += terms.pressure_gradient_difference(m_j, rb_j, pi, self.p[j], gw)
                 if ti.static(self.grad_mode == GRAD_SYMMETRIC):
                     gp *= rb_i
                 if ti.static(self.grad_mode == GRAD_CORRECTED):
@@ -858,20 +859,17 @@ class ISPHSolver(SolverCommon):
                 n_wall = ti.Vector.zero(float, self.dim)
                 v_wall = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
-                    rij = operators.rel(self.x[j], xi, self.period)
-                    r = rij.norm()
+                    j, rij, r = self._pair(i, k, xi)
                     if self.kind[j] == WALL:
-                        d = operators.rel(xi, self.x[j], self.period).dot(self.normal[j]) - 0.5 * self.dx
+                        d = rij.dot(self.normal[j]) - 0.5 * self.dx
                         if d < d_wall:
                             d_wall = d
                             n_wall = self.normal[j]
                             v_wall = self.v[j]
                     elif r < self.r_coll and r > 0.0:
-                        e = rij / r
-                        vrel = (vi - self.v[j]).dot(e)
-                        if vrel > 0.0:
-                            dv -= 0.5 * (1.0 + self.restitution) * vrel * e
+                        dvj, hit = terms.collision_impulse(vi, self.v[j], -rij / r, self.restitution)
+                        dv += dvj
+                        if hit == 1:
                             ti.atomic_add(self.collisions[None], 1)
                 vnew = vi + dv
                 vn = (vnew - v_wall).dot(n_wall)
