@@ -141,7 +141,6 @@ class SoilPasses:
         si = fl.s[i]
         xi = fl._pos(si)
         vi = fl._vel(si)
-        rhoi = si[fl.S_RHO]
         h = fl.h0
         L = ti.Matrix.zero(float, fl.dim, fl.dim)
         for k in range(fl.grid.nbr_count[i]):
@@ -172,7 +171,7 @@ class SoilPasses:
                                                self.t_cut, fl.dim, self.sin_psi, self.dilatant)
             self.sig[i] = sig
             self.eps_p[i] += dgam
-        fl.rho[i] = rhoi * (1.0 - L.trace() * dt)
+        fl.rho[i] = fl.rho[i] * (1.0 - ti.cast(L.trace() * dt, ti.f64))  # f64: small rates stay
         if ti.static(not fl.coupled):
             self.pore[i] = 0.0
             fl.p[i] = 0.0
@@ -185,7 +184,7 @@ class SoilPasses:
         i's neighbours in `_k_forces` (only i's own values are read there)."""
         fl = self.fl
         h = fl.h0
-        xi = fl.x[i]
+        xi = fl.xf(i)
         pn = 0.0
         pd = 0.0
         pdw = 0.0
@@ -194,13 +193,13 @@ class SoilPasses:
             kj = fl.kind[j]
             if kj != WATER and kj != WALL:
                 continue
-            rij = operators.rel(xi, fl.x[j], fl.period)
+            rij = operators.rel(xi, fl.xf(j), fl.period)
             r2 = rij.dot(rij)
             if r2 >= 4.0 * h * h:
                 continue
             wij = kernels.w(ti.sqrt(r2), h, fl.dim)
             if kj == WATER:
-                vj = fl.m[j] / fl.rho[j]
+                vj = fl.m[j] / fl.rhof(j)
                 pn += vj * fl.p[j] * wij
                 pd += vj * wij
             else:
@@ -235,7 +234,7 @@ class SoilPasses:
                 si = fl.s[i]
                 xi = fl._pos(si)
                 vi = fl._vel(si)
-                rhoi = fl.rho[i]
+                rhoi = fl.rhof(i)
                 sigi = self.sig[i]
                 si_r = sigi / (rhoi * rhoi)
                 p_i, _s, _t = soil.mean_and_shear(sigi, fl.dim)
@@ -264,7 +263,7 @@ class SoilPasses:
                     kj = sj[fl.S_KIND]
                     if kj == SOIL:
                         mj = sj[fl.S_M]
-                        rhoj = fl.rho[j]
+                        rhoj = fl.rhof(j)
                         vij = vi - fl._vel(sj)
                         pij = terms.artificial_viscosity(vij, rij, r2, h, ci, 0.5 * (rhoi + rhoj), self.alpha_s, 0.0,
                                                          fl.av_eps)
@@ -303,7 +302,7 @@ class SoilPasses:
                             gradp += self.phi_w[i] * fl.vol0 * fl.rho_w * fl.g.dot(dxn) * gw
                     elif kj == WATER:  # noqa: SIM102 (compile-time if)
                         if ti.static(fl.coupled):
-                            gradp += sj[fl.S_M] / fl.rho[j] * (fl.p[j] - pore_i) * gw
+                            gradp += sj[fl.S_M] / fl.rhof(j) * (fl.p[j] - pore_i) * gw
                 acc += walls.wall_mirror_solve(accs, m_wall, -b_fac * g_t)
                 if ti.static(fl.coupled):  # G_i = gradp + phi_w m_wall G_i
                     pw = self.phi_w[i]
@@ -361,7 +360,7 @@ class SoilPasses:
         ti.loop_config(serialize=fl.serial)
         for i in range(fl.n):
             if fl.fmask[i] == 1 and fl.kind[i] == WATER:
-                xi = fl.x[i]
+                xi = fl.xf(i)
                 ai = fl.a[i]
                 wsum = 0.0
                 nsum = 0.0
@@ -372,14 +371,14 @@ class SoilPasses:
                     kj = fl.kind[j]
                     if kj != SOIL and kj != WALL:
                         continue
-                    rij = operators.rel(xi, fl.x[j], fl.period)
+                    rij = operators.rel(xi, fl.xf(j), fl.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * h * h:
                         continue
                     if kj == WALL:
                         wall += fl.vol0 * kernels.w(ti.sqrt(r2), h, fl.dim)
                         continue
-                    rhoj = fl.rho[j]
+                    rhoj = fl.rhof(j)
                     wij = kernels.w(ti.sqrt(r2), h, fl.dim) * fl.m[j] / rhoj
                     wsum += wij
                     nsum += wij * (1.0 - rhoj / self.rho_g)
@@ -407,11 +406,11 @@ class SoilPasses:
         function with the same (water, soil) arguments, so F_ij = -F_ji to rounding."""
         fl = self.fl
         f = ti.Vector.zero(float, fl.dim)
-        rij = operators.rel(fl.x[i], fl.x[j], fl.period)
+        rij = operators.rel(fl.xf(i), fl.xf(j), fl.period)
         r2 = rij.dot(rij)
         if r2 < 4.0 * fl.h0 * fl.h0:
             wm = self.wmix[i]
-            rhoj = fl.rho[j]
+            rhoj = fl.rhof(j)
             cs = 0.0
             if self._movable(j):
                 cs = (1.0 - rhoj / self.rho_g) * fl.rho_w / rhoj * self.g_over_k * self.phi_w[j]
@@ -466,10 +465,10 @@ class SoilPasses:
                     if fl.kind[j] != SOIL or fl.fmask[j] != 2:
                         continue
                     fsum += self._pair_drag(i, j, dt)
-                    rij = operators.rel(fl.x[i], fl.x[j], fl.period)
+                    rij = operators.rel(fl.xf(i), fl.xf(j), fl.period)
                     r2 = rij.dot(rij)
                     if r2 < 4.0 * h * h:
-                        wij = kernels.w(ti.sqrt(r2), h, fl.dim) * fl.m[j] / fl.rho[j]
+                        wij = kernels.w(ti.sqrt(r2), h, fl.dim) * fl.m[j] / fl.rhof(j)
                         wsum += wij
                         dbar += wij * self.adrag[j]
                 ad = self.adrag[i] + fsum / fl.m[i]

@@ -178,16 +178,21 @@ class WCSPHSolver(SolverCommon):
         # vector return value ~50 us)
         self.red_kick = vec(2, float, ())
         self.red_forces = vec(_NRED, float, ())
-        self.x = vec(dim, float, n)
+        # positions, density and smoothing length are f64 at either precision: each step adds to them an
+        # increment far below their f32 resolution (a seeping particle moves ~1e-8 m per step at x ~ 1 m,
+        # where f32 resolves 1.2e-7 m; the density of stiff pore water changes by ~1e-6 kg/m^3 per step
+        # against 6e-5), which f32 would round away (docs/performance_wcsph.md, "Precision"). The pair
+        # pass reads them through the packed views in the run's precision.
+        self.x = vec(dim, ti.f64, n)
         self.v = vec(dim, float, n)  # leap-frog velocity v^{n+1/2}
         self.a = vec(dim, float, n)
         self.xs = vec(dim, float, n)  # XSPH correction eq 53
         self.rate = vec(2, float, n)  # divergence of eq 25, last two pair passes: D^{n-1/2}, D^{n-3/2}
         self.normal = vec(dim, float, n)
-        self.x0 = vec(dim, float, n)  # positions at the last neighbour-list build
-        self.rho = ti.field(float, n)
+        self.x0 = vec(dim, ti.f64, n)  # positions at the last neighbour-list build
+        self.rho = ti.field(ti.f64, n)
         self.p = ti.field(float, n)
-        self.h = ti.field(float, n)
+        self.h = ti.field(ti.f64, n)
         self.m = ti.field(float, n)
         self.wdepth = ti.field(float, n)
         self.kind = ti.field(ti.i32, n)
@@ -204,7 +209,7 @@ class WCSPHSolver(SolverCommon):
         init = initial_state(cfg, scene, self.materials)
         self.np_fp = np.float64 if is_f64() else np.float32
         f = self.np_fp
-        self.x.from_numpy(scene.position.astype(f))
+        self.x.from_numpy(scene.position.astype(np.float64))
         self.normal.from_numpy(scene.normal.astype(f))
         self.kind.from_numpy(scene.kind.astype(np.int32))
         self.ids.from_numpy(scene.ids)
@@ -218,7 +223,7 @@ class WCSPHSolver(SolverCommon):
             active[self.inflow.reserve_ids()] = 0
             self.active.from_numpy(active)
         self.v.from_numpy(init["velocity"].astype(f))
-        self.rho.from_numpy(init["density"].astype(f))
+        self.rho.from_numpy(init["density"].astype(np.float64))
         self.p.from_numpy(init["pressure"].astype(f))
         self.m.from_numpy(init["mass"].astype(f))
         self.wdepth.from_numpy(init["wall_depth"].astype(f))
@@ -299,6 +304,16 @@ class WCSPHSolver(SolverCommon):
 
     # ------------------------------------------------------------------ packed view
     @ti.func
+    def xf(self, i):
+        """Position of particle i in the run's precision (the field is f64)."""
+        return ti.cast(self.x[i], float)
+
+    @ti.func
+    def rhof(self, i):
+        """Density of particle i in the run's precision (the field is f64)."""
+        return ti.cast(self.rho[i], float)
+
+    @ti.func
     def _pos(self, sj):
         return ti.Vector([sj[d] for d in ti.static(range(self.dim))])
 
@@ -318,33 +333,34 @@ class WCSPHSolver(SolverCommon):
     def _pack_s(self, i):
         """View s of particle i: x^{n+1}, v^{n+1/2}, rho^n, m, kind[, h^n]."""
         for d in ti.static(range(self.dim)):
-            self.s[i][d] = self.x[i][d]
+            self.s[i][d] = ti.cast(self.x[i][d], float)
             self.s[i][self.S_V + d] = self.v[i][d]
-        self.s[i][self.S_RHO] = self.rho[i]
+        self.s[i][self.S_RHO] = ti.cast(self.rho[i], float)
         self.s[i][self.S_M] = self.m[i]
         self.s[i][self.S_KIND] = ti.cast(self.kind[i], float)
         if ti.static(self.variable_h):
-            self.s[i][self.S_H] = self.h[i]
+            self.s[i][self.S_H] = ti.cast(self.h[i], float)
 
     @ti.func
     def _pack_q(self, i, dt, w1, w2):
         """View q of particle i: the state the pair pass takes its pressures from. For a fluid particle the
         density predicted to the end of the step, rho~ = rho^n (1 - D~ dt) with the divergence extrapolated
         from the last two pair passes, D~ = w1 D^{n-1/2} + w2 D^{n-3/2} (docs/wcsph.md, "One step"), its
-        pressure p~ / rho~^2 by the equations of state and h~ by eq 52; rho^n and p^n with dt = 0."""
+        pressure p~ / rho~^2 by the equations of state and h~ by eq 52; rho^n and p^n with dt = 0. Computed
+        in f64 (rho and h are f64) and stored in the run's precision."""
         rho = self.rho[i]
         pr = self.p[i] / (rho * rho)
         h = self.h[i]
         if self.fmask[i] == 1 and dt > 0.0:
-            dd = (w1 * self.rate[i][0] + w2 * self.rate[i][1]) * dt
+            dd = ti.cast((w1 * self.rate[i][0] + w2 * self.rate[i][1]) * dt, ti.f64)
             rho = rho * (1.0 - dd)
             pr = self._eos_pressure(self.kind[i], rho) / (rho * rho)
             if ti.static(self.variable_h):
                 h = ti.min(ti.max(h * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
-        self.q[i][self.Q_RHO] = rho
-        self.q[i][self.Q_PR] = pr
+        self.q[i][self.Q_RHO] = ti.cast(rho, float)
+        self.q[i][self.Q_PR] = ti.cast(pr, float)
         if ti.static(self.variable_h):
-            self.q[i][self.Q_H] = h
+            self.q[i][self.Q_H] = ti.cast(h, float)
 
     # ------------------------------------------------------------------ kernels
     @ti.kernel
@@ -389,7 +405,7 @@ class WCSPHSolver(SolverCommon):
                 self._pack_s(i)
                 self._pack_q(i, dt, w1, w2)
                 dd = operators.rel(xn, self.x0[i], self.period)
-                ti.atomic_max(d2max, dd.dot(dd))
+                ti.atomic_max(d2max, ti.cast(dd.dot(dd), float))
                 if ti.static(self.variable_h):
                     ti.atomic_max(hmax, self.q[i][self.Q_H])
             if ti.static(self.moving):  # noqa: SIM102 (compile-time if)
@@ -402,7 +418,7 @@ class WCSPHSolver(SolverCommon):
                         self.s[i][d] = xn[d]
                         self.s[i][self.S_V + d] = vb[d]
                     dd = operators.rel(xn, self.x0[i], self.period)
-                    ti.atomic_max(d2max, dd.dot(dd))
+                    ti.atomic_max(d2max, ti.cast(dd.dot(dd), float))
         self.red_kick[None] = ti.Vector([d2max, hmax])
 
     @ti.kernel
@@ -463,17 +479,17 @@ class WCSPHSolver(SolverCommon):
         extrapolated with hydrostatic correction (walls.wall_pressure). The step itself needs no wall
         pressure field: each fluid particle sees a wall particle with its own extrapolated value (see
         `_k_pairs`)."""
-        xi = self.x[i]
+        xi = self.xf(i)
         hi = self.h0
         if ti.static(self.variable_h):
-            hi = self.h[i]
+            hi = ti.cast(self.h[i], float)
         hij = self._h_pair(hi, self.s[j])
-        r = operators.rel(xi, self.x[j], self.period).norm()
+        r = operators.rel(xi, self.xf(j), self.period).norm()
         wij = 0.0
         pw = 0.0
         if r < 2.0 * hij:
             wij = kernels.w(r, hij, self.dim)
-            pw = walls.wall_pressure(self.p[i], self.rho[i], self.g, xi - operators.rel(xi, self.x[j], self.period),
+            pw = walls.wall_pressure(self.p[i], self.rhof(i), self.g, xi - operators.rel(xi, self.xf(j), self.period),
                                      xi)
         return wij, pw
 
@@ -600,17 +616,18 @@ class WCSPHSolver(SolverCommon):
                 acc += walls.wall_mirror_solve(accp, m_wall, hyd_t)
                 self.a[i] = acc
                 self.rate[i] = ti.Vector([div, self.rate[i][0]])
-                rho = rho_n
+                # density and h accumulate in f64 (the fields are f64), the EOS is evaluated there too
+                rho64 = rho_n
                 if dt > 0.0:
-                    dd = div * dt
-                    rho = rho_n * (1.0 - dd)
-                    p = self._eos_pressure(ki, rho)
-                    self.rho[i] = rho
-                    self.p[i] = p
+                    dd = ti.cast(div * dt, ti.f64)  # 1 - dd in f32 would round small rates away
+                    rho64 = rho_n * (1.0 - dd)
+                    self.rho[i] = rho64
+                    self.p[i] = ti.cast(self._eos_pressure(ki, rho64), float)
                     if ti.static(self.xsph_on):
                         self.xs[i] = self.xsph_eps * xs
                     if ti.static(self.variable_h):
-                        self.h[i] = ti.min(ti.max(si[self.S_H] * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
+                        self.h[i] = ti.min(ti.max(self.h[i] * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
+                rho = ti.cast(rho64, float)
                 # reductions
                 voli = mi / rho
                 vs = vi + 0.5 * dt * acc  # synchronised velocity at this time
