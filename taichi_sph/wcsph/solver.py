@@ -18,8 +18,8 @@ dt = Delta t^n starts from the accelerations a^n of the previous step (or `initi
    h^{n+1} = h^n (1 + D_i Delta t / d) (eq 52), the XSPH correction; and the accelerations a^{n+1} from
    rho~, p~: eq 34 (pressure, Morris viscosity), eq 36 (artificial viscosity), eq 54 (cohesion), gravity;
    a wall particle seen from fluid particle i has the velocity of eq 50-51, the density of i and the
-   pressure of i extrapolated hydrostatically; the reductions eq 49 and the diagnostics need, returned
-   as one small vector (the only transfer to the host per step besides the list-rebuild test).
+   pressure of i extrapolated hydrostatically; the reductions eq 49 and the diagnostics need, written into
+   a small host array (the only transfer to the host per step besides the list-rebuild test).
    The density the forces see differs from rho^{n+1} by order Delta t^3 d^3 rho / dt^3: the exact
    pair of passes (density, then forces with rho^{n+1}) needs every neighbour's new density before any
    force. With the previous pass's rate alone (rho~ = rho^n at D~ = 0, or D~ = D^{n-1/2}) the acoustic
@@ -31,7 +31,7 @@ p~ / rho~^2[, h~]): two contiguous loads per neighbour and step (the two passes 
 a scene does not use is compiled out with ti.static flags (air, cohesion, artificial viscosity, XSPH,
 variable h, soil, moving walls, periodic axes; their values come from taichi_sph/switches.py). Soil (eq 35,
 37-45) and the Biot drag (eq 46-47) join behind flags of their own: the soil's stress update in the loop of
-the pair pass, its forces and the drag in passes after it (soil_step.py, docs/biot.md).
+the pair pass, its forces and the drag in loops after it in the same kernel (soil_step.py, docs/biot.md).
 """
 
 import logging
@@ -59,7 +59,7 @@ log = logging.getLogger("taichi_sph")
 
 #: smoothing length bounds of eq 52, in units of h0 (the neighbour grid is sized for the upper one)
 H_MIN, H_MAX = 0.5, 1.1
-#: reductions returned by the force pass
+#: reductions of the fluid's pair pass (the soil's follow them in the same buffer, soil_step.NRED_SOIL)
 _NRED = 9
 #: largest timestep.cfl at which the one-pass step damps every acoustic mode: z = omega dt < 0.708 with the
 #: fastest lattice mode omega = c G_max, G_max dx = 0.901 (2D) / 0.923 (3D), dt = cfl 1.2 dx / c
@@ -174,10 +174,6 @@ class WCSPHSolver(SolverCommon):
         vec = ti.Vector.field
         self.s = vec(self.ns, float, n)
         self.q = vec(self.nq, float, n)
-        # reductions of the kick and force passes (reading a 0-d vector field costs ~7 us, a kernel's
-        # vector return value ~50 us)
-        self.red_kick = vec(2, float, ())
-        self.red_forces = vec(_NRED, float, ())
         # positions, density and smoothing length are f64 at either precision: each step adds to them an
         # increment far below their f32 resolution (a seeping particle moves ~1e-8 m per step at x ~ 1 m,
         # where f32 resolves 1.2e-7 m; the density of stiff pore water changes by ~1e-6 kg/m^3 per step
@@ -249,14 +245,24 @@ class WCSPHSolver(SolverCommon):
         self.r_list = 0.0  # list radius at the last build
         self.hmax = self.h0
         self.rebuilds = 0
+        #: particle arrays are put into cell order at every `reorder_every`-th list build (1: at every build;
+        #: measured in docs/performance_wcsph.md, "Cell order"); the builds in between walk the cells
+        #: through the sort's permutation
+        self.reorder_every = 1
+        self.searches = 0
         self.dt_prev = 0.0
         self.dt_prev2 = 0.0
         self.rates_known = 0  # pair passes behind the divergences in `rate` (at most 2)
         self.removed_total = 0
         self.step_count = 0
         self.time = 0.0
-        self.timers = {k: 0.0 for k in ("update", "neighbours", "pairs", "soil")}
+        self.timers = {k: 0.0 for k in ("update", "neighbours", "pairs")}
         self.red = np.zeros(_NRED)
+        # reductions of the kick and of the pair pass (with the soil's passes), written by the kernels straight
+        # into these host arrays (external-array arguments: no read-back launch, no per-element reads, which
+        # cost ~2.5 us each)
+        self.red_kick = np.zeros(2, self.np_fp)
+        self.red_pairs = np.zeros(_NRED + (self.soil.nred if self.has_soil else 0), self.np_fp)
         self.last = {}
 
     # ------------------------------------------------------------------ materials
@@ -382,7 +388,7 @@ class WCSPHSolver(SolverCommon):
             self._pack_q(i, dt, w1, w2)
 
     @ti.kernel
-    def _k_kick_drift(self, dt: float, dt_prev: float, w1: float, w2: float):
+    def _k_kick_drift(self, dt: float, dt_prev: float, w1: float, w2: float, out: ti.types.ndarray()):
         """Leap-frog (eq 48): kick with a^n, drift with v^{n+1/2} plus the XSPH correction (eq 53); then the
         packed views of the pair pass (`_pack_s`, `_pack_q`). Returns the largest squared displacement
         since the last list build and the largest h the pair pass will use."""
@@ -419,7 +425,8 @@ class WCSPHSolver(SolverCommon):
                         self.s[i][self.S_V + d] = vb[d]
                     dd = operators.rel(xn, self.x0[i], self.period)
                     ti.atomic_max(d2max, ti.cast(dd.dot(dd), float))
-        self.red_kick[None] = ti.Vector([d2max, hmax])
+        out[0] = d2max
+        out[1] = hmax
 
     @ti.kernel
     def _k_normalise(self, dt: float, w1: float, w2: float):
@@ -494,7 +501,19 @@ class WCSPHSolver(SolverCommon):
         return wij, pw
 
     @ti.kernel
-    def _k_pairs(self, dt: float):
+    def _k_pairs(self, dt: float, out: ti.types.ndarray()):
+        """The fluid's pair pass (`_fluid_pass`), then the soil's passes (soil_step.SoilPasses.passes): one
+        launch, loops one after the other; the reductions of all of them go into `out`."""
+        red = self._fluid_pass(dt)
+        for k in ti.static(range(_NRED)):
+            out[k] = red[k]
+        if ti.static(self.has_soil):
+            rs = self.soil.passes(dt)
+            for k in ti.static(range(self.soil.nred)):
+                out[_NRED + k] = rs[k]
+
+    @ti.func
+    def _fluid_pass(self, dt):
         """The pair pass at x^{n+1} with v^{n+1/2}, one walk over each fluid particle's neighbours for:
         - continuity: D_i = sum_j V_j (v_j - v_i) . grad_i W_ij (eq 25 in volume form, V_j = m_j / rho_j^n;
           walls with the virtual velocity of eq 50-51), rho^{n+1} = rho^n (1 - D_i dt) (eq 48),
@@ -503,7 +522,7 @@ class WCSPHSolver(SolverCommon):
         - forces with the predicted rho~, p~ of the view q: eq 34 (pressure; Morris viscosity with
           v^{n+1/2}), eq 36, eq 54 and gravity.
         Soil particles take their stress update in the same loop (soil_step.py). Reductions: kinetic energy,
-        max speed, water volume, min h/|a|, min h/c, non-finite count, first bad id, min h, air volume.
+        max speed, water volume, min h/|a|, min h/c, non-finite count, first bad id, min h, air volume (returned).
         With dt = 0 (initial_diagnostics) the density, pressure, h and XSPH correction stay as they are."""
         ke = 0.0
         vmax = 0.0
@@ -650,17 +669,19 @@ class WCSPHSolver(SolverCommon):
             if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if)
                 if self.fmask[i] == 2:
                     self.soil.stress_at(i, dt)
-        self.red_forces[None] = ti.Vector([ke, vmax, vol, h_over_a, h_over_c, bad, first_bad, hmin, vol_air])
+        return ti.Vector([ke, vmax, vol, h_over_a, h_over_c, bad, first_bad, hmin, vol_air])
 
     # ------------------------------------------------------------------ step
     def neighbour_search(self, dt: float = 0.0, w=(0.0, 0.0)):
         """Sort into cells, reorder every particle array, rebuild the lists with the Verlet skin; then the
         packed views for a pair pass over a step of length dt with the prediction weights w (`_weights`)."""
-        self._sort_and_reorder()
+        reorder = self.searches % self.reorder_every == 0
+        self.searches += 1
+        self._sort_and_reorder(reorder)
         self._k_mask()
         self.r_list = min(self.cell, 2.0 * self.hmax + self.skin)
         try:
-            self.grid.build_neighbour_lists(self.x, self.fmask, self.n, self.r_list, self.ids)
+            self.grid.build_neighbour_lists(self.x, self.fmask, self.n, self.r_list, self.ids, in_place=reorder)
         except NeighbourOverflowError as exc:
             raise guard.neighbour_overflow_error(self.step_count, self.time, exc) from None
         self._k_after_build(dt, w[0], w[1])
@@ -670,23 +691,27 @@ class WCSPHSolver(SolverCommon):
         return prediction_weights(dt, self.dt_prev, self.dt_prev2, self.rates_known)
 
     def _pairs(self, dt: float):
-        self._k_pairs(dt)
+        """The pair pass and the soil's passes (one kernel), then their reductions: diagnostics, the
+        non-finite checks (the fluid's first)."""
+        self._k_pairs(dt, self.red_pairs)
         self.rates_known = min(self.rates_known + 1, 2)
-        self.red = self.red_forces[None].to_numpy()
+        self.red = self.red_pairs[:_NRED].copy()
         r = self.red
         self.last = {"kinetic_energy": float(r[0]), "max_speed": float(r[1]), "water_volume": float(r[2]),
                      "air_volume": float(r[8])}
         if r[5] > 0:
             raise guard.non_finite_error(self.step_count, self.time, int(r[5]), int(r[6]),
                                          "position, velocity, density or pressure")
+        if self.has_soil:
+            self.soil.after_passes(self.red_pairs[_NRED:])
 
     def step(self, dt: float) -> dict:
         t0 = _time.perf_counter()
         if self.moving:
             self.motion.set_step(self.time, self.time + dt)
         w = self._weights(dt)
-        self._k_kick_drift(dt, self.dt_prev, w[0], w[1])
-        d2max, hmax = self.red_kick[None].to_numpy()
+        self._k_kick_drift(dt, self.dt_prev, w[0], w[1], self.red_kick)
+        d2max, hmax = self.red_kick
         if self.variable_h:
             self.hmax = float(hmax)
         self.step_count += 1
@@ -701,10 +726,7 @@ class WCSPHSolver(SolverCommon):
         if self.normalised and self.step_count % self.normalise_every == 0:
             self._k_normalise(dt, w[0], w[1])
         self._pairs(dt)
-        t0 = self._tick("pairs", t0)
-        if self.has_soil:
-            self.soil.forces(dt)
-            self._tick("soil", t0)
+        self._tick("pairs", t0)
         self.dt_prev2 = self.dt_prev
         self.dt_prev = dt
         return self.last
@@ -715,8 +737,6 @@ class WCSPHSolver(SolverCommon):
         its forces, so that a^0 of the soil sees its pore pressure."""
         self.neighbour_search()
         self._pairs(0.0)
-        if self.has_soil:
-            self.soil.forces(0.0)
         return self.last
 
     def propose_dt(self) -> tuple[float, int]:
