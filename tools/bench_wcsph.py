@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -278,7 +279,7 @@ def comparison_markdown(rounds, against: str) -> str:
                          f"{1e3 * b['main_thread_cpu_seconds_per_step']:.2f} | {b['cpu_over_wall']:.2f} | "
                          f"{b['mipps']:.2f} | {lb[0]:.1f} / {lb[1]:.1f} | {cratio:.2f} | {ratio:.2f} |")
     for (name, prec), r in ratios.items():
-        med = [sorted(x)[len(x) // 2] for x in zip(*r)]
+        med = [statistics.median(x) for x in zip(*r)]
         lines.append(f"| {name} | {prec} | median | | | | | | | | | | | {med[0]:.2f} | {med[1]:.2f} |")
     return "\n".join(lines) + "\n"
 
