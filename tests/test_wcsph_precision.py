@@ -37,8 +37,21 @@ def test_hydrostatic_tank_f32_matches_f64(run_cli, tmp_path):
     runs = {}
     for prec in ("f32", "f64"):
         out = tmp_path / f"h_{prec}.h5"
-        r = run_cli("--config", "configs/hydrostatic.yaml", "--set", "mode=wcsph_biot", "--set", "end_time=0.5",
-                    "--set", "output.every=0.05", "--set", f"precision={prec}", "--out", out, "--no-progress")
+        r = run_cli(
+            "--config",
+            "configs/hydrostatic.yaml",
+            "--set",
+            "mode=wcsph_biot",
+            "--set",
+            "end_time=0.5",
+            "--set",
+            "output.every=0.05",
+            "--set",
+            f"precision={prec}",
+            "--out",
+            out,
+            "--no-progress",
+        )
         assert r.returncode == 0, r.stderr
         runs[prec] = _floor_pressures(out)
     for prec, p in runs.items():
@@ -53,9 +66,25 @@ def test_dambreak_front_f32_matches_f64(run_cli, tmp_path):
     Measured: within 0.0027 % of them (-0.0027 to +0.0022 %). Bound 0.01 %: the 4-digit references round by
     up to 0.0045 %."""
     out = tmp_path / "db32.h5"
-    r = run_cli("--config", "configs/dambreak_wcsph.yaml", "--variant", "still", "--set", "dx=0.05",
-                "--set", "end_time=0.68", "--set", "tank.size=[4.5, 2.2]", "--set", "output.every=0.02",
-                "--set", "precision=f32", "--out", out, "--no-progress")
+    r = run_cli(
+        "--config",
+        "configs/dambreak_wcsph.yaml",
+        "--variant",
+        "still",
+        "--set",
+        "dx=0.05",
+        "--set",
+        "end_time=0.68",
+        "--set",
+        "tank.size=[4.5, 2.2]",
+        "--set",
+        "output.every=0.02",
+        "--set",
+        "precision=f32",
+        "--out",
+        out,
+        "--no-progress",
+    )
     assert r.returncode == 0, r.stderr
     T, Z = surge_front_series(out, 1.0)
     f64 = np.array([1.1171, 1.4278, 1.8565, 2.3678, 2.9414, 3.5361])

@@ -61,17 +61,37 @@ def case_table(args) -> dict:
         "dambreak_20k": (str(ROOT / DAM), None, ["dx=0.01"], "2D dam break, dx 1 cm (20k water)"),
         "dambreak_80k": (str(ROOT / DAM), None, ["dx=0.005"], "2D dam break, dx 5 mm (80k water)"),
         # the 3d variant (column 1 x 0.2 x 2 m in a tank 4 x 0.2 x 3 m) at 200k water particles
-        "dambreak3d_200k": (str(ROOT / DAM), "3d", [f"dx={(0.4 / 2e5) ** (1 / 3):.5f}"],
-                            "3D dam break, 0.2 m deep slice (200k water)"),
-        "levee_saturated": (levee, args.saturated, ["wcsph.soil.start_from=null"],
-                            f"levee, soil + water ({Path(levee).name} variant {args.saturated})"),
-        "levee_dry": (levee, args.dry, ["wcsph.soil.start_from=null"],
-                      f"levee, soil + water + air ({Path(levee).name} variant {args.dry})"),
+        "dambreak3d_200k": (
+            str(ROOT / DAM),
+            "3d",
+            [f"dx={(0.4 / 2e5) ** (1 / 3):.5f}"],
+            "3D dam break, 0.2 m deep slice (200k water)",
+        ),
+        "levee_saturated": (
+            levee,
+            args.saturated,
+            ["wcsph.soil.start_from=null"],
+            f"levee, soil + water ({Path(levee).name} variant {args.saturated})",
+        ),
+        "levee_dry": (
+            levee,
+            args.dry,
+            ["wcsph.soil.start_from=null"],
+            f"levee, soil + water + air ({Path(levee).name} variant {args.dry})",
+        ),
     }
 
 
-def bench_case(dx: float | None = None, steps: int = 300, warmup: int = 200, overrides=(), until: float | None = None,
-               config: str | None = None, variant: str | None = None, reorder_every: int = 1) -> dict:
+def bench_case(
+    dx: float | None = None,
+    steps: int = 300,
+    warmup: int = 200,
+    overrides=(),
+    until: float | None = None,
+    config: str | None = None,
+    variant: str | None = None,
+    reorder_every: int = 1,
+) -> dict:
     """Time `steps` steps after `warmup` ones of `config` (default: the dam break, at spacing dx); with
     `until`, time every step from the warm-up on up to that simulated time instead (stability over a whole
     run: smallest and largest step, the surge front, i.e. the largest x of any water particle, at the end).
@@ -128,18 +148,30 @@ def bench_case(dx: float | None = None, steps: int = 300, warmup: int = 200, ove
 
         n = solver.n
         water = solver.kind.to_numpy()[:n] == WATER
-        run_extra = {"dt_min": min(dts), "dt_max": max(dts), "front_x": float(solver.x.to_numpy()[:n][water, 0].max()),
-                     "tank_length": float(solver.cfg.tank.size[0])}
+        run_extra = {
+            "dt_min": min(dts),
+            "dt_max": max(dts),
+            "front_x": float(solver.x.to_numpy()[:n][water, 0].max()),
+            "tank_length": float(solver.cfg.tank.size[0]),
+        }
     wall = sum(chunks)
     best = min(chunks[:-1] or chunks) / chunk  # the last chunk of a run to `until` may be short
     moving = solver.n_fluid + getattr(solver, "n_soil", 0)
     simulated = solver.time - time0
     return {
-        "case": "dam break 2D", "dx": cfg.dx, "fluid_particles": solver.n_fluid,
-        "soil_particles": getattr(solver, "n_soil", 0), "moving_particles": moving, "all_particles": solver.n,
-        "steps": steps, "simulated_time_at_end": solver.time, "simulated_seconds": simulated,
-        "seconds_per_step": wall / steps, "particle_steps_per_second": moving * steps / wall,
-        "mipps": moving * steps / wall / 1e6, "mipps_best_chunk": moving / best / 1e6,
+        "case": "dam break 2D",
+        "dx": cfg.dx,
+        "fluid_particles": solver.n_fluid,
+        "soil_particles": getattr(solver, "n_soil", 0),
+        "moving_particles": moving,
+        "all_particles": solver.n,
+        "steps": steps,
+        "simulated_time_at_end": solver.time,
+        "simulated_seconds": simulated,
+        "seconds_per_step": wall / steps,
+        "particle_steps_per_second": moving * steps / wall,
+        "mipps": moving * steps / wall / 1e6,
+        "mipps_best_chunk": moving / best / 1e6,
         "wall_seconds_per_simulated_second": wall / simulated if simulated > 0 else float("nan"),
         "cpu_seconds_per_simulated_second": cpu / simulated if simulated > 0 else float("nan"),
         "steps_per_simulated_second": steps / simulated if simulated > 0 else float("nan"),
@@ -180,32 +212,42 @@ PHASES = ("update", "neighbours", "pairs", "soil")
 
 def markdown(results, info) -> str:
     lines = [
-        (f"Machine: {info['machine']}; Taichi {info['taichi']}, arch {info['arch']}, {info['threads']} threads. "
-         f"Produced by `python tools/bench_wcsph.py` on {info['date']}" +
-         (f" (overrides {' '.join(info['overrides'])})" if info.get("overrides") else "") + "."),
+        (
+            f"Machine: {info['machine']}; Taichi {info['taichi']}, arch {info['arch']}, {info['threads']} "
+            f"threads. "
+            f"Produced by `python tools/bench_wcsph.py` on {info['date']}"
+            + (f" (overrides {' '.join(info['overrides'])})" if info.get("overrides") else "")
+            + "."
+        ),
         "",
-        f"Each case timed over {info['steps']} steps after {info['warmup']} steps of warm-up (JIT compilation "
+        f"Each case timed over {info['steps']} steps after {info['warmup']} steps of warm-up (JIT "
+        f"compilation "
         "excluded), adaptive step of eq 49. Particle-steps count the particles that move (water, air, soil). "
         "Wall s per simulated s = wall time per step / mean step. CPU s / wall s: all threads of the process "
-        "over the wall time of the timed loop (2 = both cores busy with this run). CPU ms per step counts all "
-        "threads; `main` is the calling thread's CPU time per step (Python, kernel launches, host reads, serial "
+        "over the wall time of the timed loop (2 = both cores busy with this run). CPU ms per step counts "
+        "all "
+        "threads; `main` is the calling thread's CPU time per step (Python, kernel launches, host reads, "
+        "serial "
         "parts of kernels; Taichi's worker threads run the parallel loops). Load: the 1-minute load average "
         "at the start / end of the run (other processes on the machine). The phases are wall ms per step.",
         "",
         "| case | precision | moving particles | all particles | M particle-steps/s | (fastest tenth) | "
-        "wall s per simulated s | steps per simulated s | CPU s / wall s | CPU ms/step | main ms/step | load | "
+        "wall s per simulated s | steps per simulated s | CPU s / wall s | CPU ms/step | main ms/step | load "
+        "| "
         "steps per list rebuild | " + " | ".join(PHASES) + " |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|" + "---|" * len(PHASES),
     ]
     for r in results:
         ph = " | ".join(f"{1e3 * r['phase_seconds_per_step'].get(p, 0.0):.2f}" for p in PHASES)
-        lines.append(f"| {r['name']} | {r['precision']} | {r['moving_particles']} | {r['all_particles']} | "
-                     f"{r['mipps']:.2f} | {r['mipps_best_chunk']:.2f} | "
-                     f"{r['wall_seconds_per_simulated_second']:.1f} | {r['steps_per_simulated_second']:.0f} | "
-                     f"{r['cpu_over_wall']:.2f} | {1e3 * r['cpu_seconds_per_step']:.2f} | "
-                     f"{1e3 * r['main_thread_cpu_seconds_per_step']:.2f} | "
-                     f"{r['load_start_end'][0]:.1f} / {r['load_start_end'][1]:.1f} | {r['steps_per_rebuild']:.1f} | "
-                     f"{ph} |")
+        lines.append(
+            f"| {r['name']} | {r['precision']} | {r['moving_particles']} | {r['all_particles']} | "
+            f"{r['mipps']:.2f} | {r['mipps_best_chunk']:.2f} | "
+            f"{r['wall_seconds_per_simulated_second']:.1f} | {r['steps_per_simulated_second']:.0f} | "
+            f"{r['cpu_over_wall']:.2f} | {1e3 * r['cpu_seconds_per_step']:.2f} | "
+            f"{1e3 * r['main_thread_cpu_seconds_per_step']:.2f} | "
+            f"{r['load_start_end'][0]:.1f} / {r['load_start_end'][1]:.1f} | {r['steps_per_rebuild']:.1f} | "
+            f"{ph} |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -223,23 +265,58 @@ def run_one(args) -> list:
     for name in args.case:
         config, variant, sets, what = table[name]
         load0 = load_average()
-        r = bench_case(None, args.steps, args.warmup, [*sets, *args.overrides], config=config, variant=variant,
-                       reorder_every=args.reorder_every)
+        r = bench_case(
+            None,
+            args.steps,
+            args.warmup,
+            [*sets, *args.overrides],
+            config=config,
+            variant=variant,
+            reorder_every=args.reorder_every,
+        )
         r.update(name=name, what=what, precision=be["precision"], load_start_end=[load0, load_average()])
-        print(f"{name} {be['precision']}: {r['moving_particles']} moving particles, {r['mipps']:.2f} M particle-steps/s "
-              f"(fastest tenth {r['mipps_best_chunk']:.2f}), {r['wall_seconds_per_simulated_second']:.1f} wall s per "
-              f"simulated s, cpu/wall {r['cpu_over_wall']:.2f}, CPU {1e3 * r['cpu_seconds_per_step']:.2f} ms/step, main "
-              f"{1e3 * r['main_thread_cpu_seconds_per_step']:.2f} ms/step, {r['steps_per_rebuild']:.1f} steps per "
-              f"rebuild, load {r['load_start_end'][0]:.1f} / {r['load_start_end'][1]:.1f}", flush=True)
+        print(
+            f"{name} {be['precision']}: {r['moving_particles']} moving particles, {r['mipps']:.2f} M "
+            f"particle-steps/s "
+            f"(fastest tenth {r['mipps_best_chunk']:.2f}), {r['wall_seconds_per_simulated_second']:.1f} wall "
+            f"s per "
+            f"simulated s, cpu/wall {r['cpu_over_wall']:.2f}, CPU {1e3 * r['cpu_seconds_per_step']:.2f} "
+            f"ms/step, main "
+            f"{1e3 * r['main_thread_cpu_seconds_per_step']:.2f} ms/step, {r['steps_per_rebuild']:.1f} steps "
+            f"per "
+            f"rebuild, load {r['load_start_end'][0]:.1f} / {r['load_start_end'][1]:.1f}",
+            flush=True,
+        )
         results.append(r)
     return results
 
 
 def child(tree: Path, prec: str, args, path: Path) -> list:
     """One precision, every case, in a process of its own with the code of checkout `tree`."""
-    cmd = [sys.executable, __file__, "--precision", prec, "--results-json", str(path), "--code", str(tree),
-           "--arch", args.arch, "--steps", str(args.steps), "--warmup", str(args.warmup), "--case", *args.case,
-           "--levee", str(Path(args.levee).resolve()), "--saturated", args.saturated, "--dry", args.dry]
+    cmd = [
+        sys.executable,
+        __file__,
+        "--precision",
+        prec,
+        "--results-json",
+        str(path),
+        "--code",
+        str(tree),
+        "--arch",
+        args.arch,
+        "--steps",
+        str(args.steps),
+        "--warmup",
+        str(args.warmup),
+        "--case",
+        *args.case,
+        "--levee",
+        str(Path(args.levee).resolve()),
+        "--saturated",
+        args.saturated,
+        "--dry",
+        args.dry,
+    ]
     if args.reorder_every != 1:
         cmd += ["--reorder-every", str(args.reorder_every)]
     for o in args.overrides:
@@ -251,8 +328,12 @@ def child(tree: Path, prec: str, args, path: Path) -> list:
 def describe_checkout(path: str) -> str:
     """`commit <sha>` of a git checkout (its folder name when git cannot tell), for the tables."""
     try:
-        sha = subprocess.run(["git", "-C", str(path), "rev-parse", "--short", "HEAD"], capture_output=True,
-                             text=True, check=True).stdout.strip()
+        sha = subprocess.run(
+            ["git", "-C", str(path), "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
         return f"commit {sha}"
     except (OSError, subprocess.CalledProcessError):
         return Path(path).name
@@ -260,24 +341,30 @@ def describe_checkout(path: str) -> str:
 
 def comparison_markdown(rounds, against: str) -> str:
     """Rounds of (this checkout, the other) run back to back: CPU time per step, rates and their ratios."""
-    lines = [f"Interleaved with the code of {against} (the other checkout), round by round, same cases: CPU ms per "
-             "step (all threads) and the main thread's, CPU s / wall s, M particle-steps/s, the 1-minute load "
-             "average at the start / end of each run, and the ratios other / this of the CPU time per step "
-             "(the measure that other processes disturb least) and this / other of the wall-clock rate.",
-             "", "| case | precision | round | this: CPU ms/step | main | CPU/wall | M p-steps/s | load | "
-             "other: CPU ms/step | main | CPU/wall | M p-steps/s | load | CPU ratio | rate ratio |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"Interleaved with the code of {against} (the other checkout), round by round, same cases: CPU ms "
+        f"per "
+        "step (all threads) and the main thread's, CPU s / wall s, M particle-steps/s, the 1-minute load "
+        "average at the start / end of each run, and the ratios other / this of the CPU time per step "
+        "(the measure that other processes disturb least) and this / other of the wall-clock rate.",
+        "",
+        "| case | precision | round | this: CPU ms/step | main | CPU/wall | M p-steps/s | load | "
+        "other: CPU ms/step | main | CPU/wall | M p-steps/s | load | CPU ratio | rate ratio |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     ratios = {}
     for k, (new, old) in enumerate(rounds):
         for a, b in zip(new, old):
             ratio, cratio = a["mipps"] / b["mipps"], b["cpu_seconds_per_step"] / a["cpu_seconds_per_step"]
             ratios.setdefault((a["name"], a["precision"]), []).append((cratio, ratio))
             la, lb = a["load_start_end"], b["load_start_end"]
-            lines.append(f"| {a['name']} | {a['precision']} | {k + 1} | {1e3 * a['cpu_seconds_per_step']:.2f} | "
-                         f"{1e3 * a['main_thread_cpu_seconds_per_step']:.2f} | {a['cpu_over_wall']:.2f} | "
-                         f"{a['mipps']:.2f} | {la[0]:.1f} / {la[1]:.1f} | {1e3 * b['cpu_seconds_per_step']:.2f} | "
-                         f"{1e3 * b['main_thread_cpu_seconds_per_step']:.2f} | {b['cpu_over_wall']:.2f} | "
-                         f"{b['mipps']:.2f} | {lb[0]:.1f} / {lb[1]:.1f} | {cratio:.2f} | {ratio:.2f} |")
+            lines.append(
+                f"| {a['name']} | {a['precision']} | {k + 1} | {1e3 * a['cpu_seconds_per_step']:.2f} | "
+                f"{1e3 * a['main_thread_cpu_seconds_per_step']:.2f} | {a['cpu_over_wall']:.2f} | "
+                f"{a['mipps']:.2f} | {la[0]:.1f} / {la[1]:.1f} | {1e3 * b['cpu_seconds_per_step']:.2f} | "
+                f"{1e3 * b['main_thread_cpu_seconds_per_step']:.2f} | {b['cpu_over_wall']:.2f} | "
+                f"{b['mipps']:.2f} | {lb[0]:.1f} / {lb[1]:.1f} | {cratio:.2f} | {ratio:.2f} |"
+            )
     for (name, prec), r in ratios.items():
         med = [statistics.median(x) for x in zip(*r)]
         lines.append(f"| {name} | {prec} | median | | | | | | | | | | | {med[0]:.2f} | {med[1]:.2f} |")
@@ -286,16 +373,26 @@ def comparison_markdown(rounds, against: str) -> str:
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--case", nargs="+", default=["dambreak_20k", "dambreak_80k", "levee_saturated", "levee_dry"],
-                    choices=["dambreak_20k", "dambreak_80k", "dambreak3d_200k", "levee_saturated", "levee_dry"])
-    ap.add_argument("--levee", default=str(ROOT / "configs" / "embankment.yaml"), help="config of the levee cases")
+    ap.add_argument(
+        "--case",
+        nargs="+",
+        default=["dambreak_20k", "dambreak_80k", "levee_saturated", "levee_dry"],
+        choices=["dambreak_20k", "dambreak_80k", "dambreak3d_200k", "levee_saturated", "levee_dry"],
+    )
+    ap.add_argument(
+        "--levee", default=str(ROOT / "configs" / "embankment.yaml"), help="config of the levee cases"
+    )
     ap.add_argument("--saturated", default="saturated", help="its variant with soil and water")
     ap.add_argument("--dry", default="dry", help="its variant with soil, water and air")
     ap.add_argument("--steps", type=int, default=300)
     ap.add_argument("--warmup", type=int, default=200)
     ap.add_argument("--arch", default="cpu")
-    ap.add_argument("--reorder-every", type=int, default=1,
-                    help="put the particles into cell order at every K-th list build only (solver.reorder_every)")
+    ap.add_argument(
+        "--reorder-every",
+        type=int,
+        default=1,
+        help="put the particles into cell order at every K-th list build only (solver.reorder_every)",
+    )
     ap.add_argument("--precision", nargs="+", default=["f64"], choices=["auto", "f32", "f64"])
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", default=str(ROOT / "docs" / "performance_wcsph.md"))
@@ -324,10 +421,17 @@ def main():
                 results += child(ROOT, prec, args, Path(tmp) / f"{prec}.json")
     import taichi as ti
 
-    info = {"machine": machine(), "taichi": ".".join(map(str, ti.__version__)), "arch": args.arch,
-            "threads": os.environ.get("TI_CPU_MAX_NUM_THREADS", os.cpu_count()),
-            "date": time.strftime("%Y-%m-%d"), "warmup": args.warmup, "steps": args.steps,
-            "overrides": args.overrides, "levee": args.levee}
+    info = {
+        "machine": machine(),
+        "taichi": ".".join(map(str, ti.__version__)),
+        "arch": args.arch,
+        "threads": os.environ.get("TI_CPU_MAX_NUM_THREADS", os.cpu_count()),
+        "date": time.strftime("%Y-%m-%d"),
+        "warmup": args.warmup,
+        "steps": args.steps,
+        "overrides": args.overrides,
+        "levee": args.levee,
+    }
     out = Path(args.out)
     info["against"] = describe_checkout(args.against) if args.against else None
     payload = {"info": info, "results": results, "rounds": rounds}

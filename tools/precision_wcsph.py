@@ -70,8 +70,13 @@ def run(src: Path, config: str, out: Path, sets: list[str], args=()) -> dict:
     env = dict(os.environ, PYTHONPATH=str(src), TI_CPU_MAX_NUM_THREADS="1", TAICHI_SPH_PROGRESS="0")
     cpu0, load0 = children_cpu(), os.getloadavg()[0]
     res = run_cli(cmd, env=env, cwd=src)
-    out_row = {"rc": res.rc, "message": res.message if res.rc else "", "wall_s": res.seconds,
-               "cpu_s": children_cpu() - cpu0, "load": [load0, os.getloadavg()[0]]}
+    out_row = {
+        "rc": res.rc,
+        "message": res.message if res.rc else "",
+        "wall_s": res.seconds,
+        "cpu_s": children_cpu() - cpu0,
+        "load": [load0, os.getloadavg()[0]],
+    }
     if res.rc:
         print(res.output[-2000:], file=sys.stderr)
     else:
@@ -85,8 +90,12 @@ def hydrostatic(src, prec, tmp, opts) -> dict:
 
     end = opts.hydrostatic_time
     out = tmp / f"hyd_{prec}.h5"
-    row = run(src, "configs/hydrostatic.yaml", out, ["mode=wcsph_biot", f"precision={prec}", f"end_time={end:g}",
-                                                      f"output.every={end / 20:g}"])
+    row = run(
+        src,
+        "configs/hydrostatic.yaml",
+        out,
+        ["mode=wcsph_biot", f"precision={prec}", f"end_time={end:g}", f"output.every={end / 20:g}"],
+    )
     if row["rc"]:
         return row
     with RunFile(out) as rf:
@@ -102,12 +111,16 @@ def hydrostatic(src, prec, tmp, opts) -> dict:
         d = np.linalg.norm(rf.field("position", rf.n_frames - 1)[water] - x0, axis=1) / rf.dx
         diag = rf.diagnostics()
         late = diag["time"] >= 0.5 * diag["time"][-1]
-        row.update(steps=int(len(diag["time"])), floor_pressure_end=p_floor[-1],
-                   floor_pressure_late=[min(p_floor[len(p_floor) // 2:]), max(p_floor[len(p_floor) // 2:])],
-                   speed_late=float(diag["max_speed"][late].max()) / math.sqrt(G * HYDRO_H),
-                   volume_drift=float(diag["water_volume"][-1] / diag["water_volume"][0] - 1),
-                   moved_rms_dx=float(np.sqrt(np.mean(d**2))), moved_max_dx=float(d.max()),
-                   positions=str(out))
+        row.update(
+            steps=int(len(diag["time"])),
+            floor_pressure_end=p_floor[-1],
+            floor_pressure_late=[min(p_floor[len(p_floor) // 2 :]), max(p_floor[len(p_floor) // 2 :])],
+            speed_late=float(diag["max_speed"][late].max()) / math.sqrt(G * HYDRO_H),
+            volume_drift=float(diag["water_volume"][-1] / diag["water_volume"][0] - 1),
+            moved_rms_dx=float(np.sqrt(np.mean(d**2))),
+            moved_max_dx=float(d.max()),
+            positions=str(out),
+        )
     return row
 
 
@@ -116,15 +129,23 @@ def dambreak(src, prec, tmp, opts) -> dict:
 
     end = 3.05 / math.sqrt(2 * G / DAM_A)
     out = tmp / f"dam_{prec}.h5"
-    row = run(src, "configs/dambreak_wcsph.yaml", out, [f"precision={prec}", f"dx={DAM_DX:g}", f"end_time={end:.4g}",
-                                                         f"output.every={end / 40:.4g}"])
+    row = run(
+        src,
+        "configs/dambreak_wcsph.yaml",
+        out,
+        [f"precision={prec}", f"dx={DAM_DX:g}", f"end_time={end:.4g}", f"output.every={end / 40:.4g}"],
+    )
     if row["rc"]:
         return row
     with RunFile(out) as rf:
         water = rf.kind == 0
         T = rf.times * math.sqrt(2 * G / DAM_A)
-        Z = np.array([rf.field("position", i)[water & rf.field("active", i)][:, 0].max() / DAM_A
-                      for i in range(rf.n_frames)])
+        Z = np.array(
+            [
+                rf.field("position", i)[water & rf.field("active", i)][:, 0].max() / DAM_A
+                for i in range(rf.n_frames)
+            ]
+        )
         diag = rf.diagnostics()
     errs = []
     for name in ("martin_moyce_a1.125in_n2sq2", "martin_moyce_a2.25in_n2sq2"):
@@ -132,9 +153,13 @@ def dambreak(src, prec, tmp, opts) -> dict:
         ref = np.array([ln.split(",") for ln in lines if ln.strip() and not ln.startswith(("#", "T"))], float)
         sel = (ref[:, 0] >= 1.0) & (ref[:, 0] <= 3.0)
         errs.append(np.interp(ref[sel, 0], T, Z) / ref[sel, 1] - 1)
-    row.update(steps=int(len(diag["time"])), T=T.tolist(), Z=Z.tolist(),
-               martin_moyce_error=float(np.mean(np.abs(np.concatenate(errs)))),
-               volume_drift=float(diag["water_volume"][-1] / diag["water_volume"][0] - 1))
+    row.update(
+        steps=int(len(diag["time"])),
+        T=T.tolist(),
+        Z=Z.tolist(),
+        martin_moyce_error=float(np.mean(np.abs(np.concatenate(errs)))),
+        volume_drift=float(diag["water_volume"][-1] / diag["water_volume"][0] - 1),
+    )
     return row
 
 
@@ -144,7 +169,9 @@ def terzaghi(src, prec, tmp, opts) -> dict:
     sets = [f"precision={prec}", "dx=0.01"]
     out, base = tmp / f"tz_{prec}.h5", tmp / f"tz0_{prec}.h5"
     row = run(src, "configs/consolidation.yaml", out, sets)
-    twin = run(src, "configs/consolidation.yaml", base, [*sets, "wcsph.soil.initial_excess_pressure.amplitude=0"])
+    twin = run(
+        src, "configs/consolidation.yaml", base, [*sets, "wcsph.soil.initial_excess_pressure.amplitude=0"]
+    )
     if row["rc"] or twin["rc"]:
         return row if row["rc"] else twin
     row["cpu_s"] += twin["cpu_s"]
@@ -184,53 +211,93 @@ def _cpu(rows, prec) -> str:
 
 
 def markdown(res: dict, info: dict) -> str:
-    lines = [f"Produced by `python tools/precision_wcsph.py` on {info['date']}: {info['machine']}; one thread "
-             "per run; CPU s: the process's CPU time (other load disturbs it much less than wall time); load: the "
-             "1-minute load average of the machine at the start / end of the run.", ""]
-    lines += ["| case | precision | measure | value | against the other precision | CPU s | load |",
-              "|---|---|---|---|---|---|---|"]
+    lines = [
+        f"Produced by `python tools/precision_wcsph.py` on {info['date']}: {info['machine']}; one thread "
+        "per run; CPU s: the process's CPU time (other load disturbs it much less than wall time); load: the "
+        "1-minute load average of the machine at the start / end of the run.",
+        "",
+    ]
+    lines += [
+        "| case | precision | measure | value | against the other precision | CPU s | load |",
+        "|---|---|---|---|---|---|---|",
+    ]
     f64 = {c: next((r for k, r in rows.items() if k.startswith("f64")), {}) for c, rows in res.items()}
     for case, rows in res.items():
         for prec, r in rows.items():
             load = f"{r['load'][0]:.1f} / {r['load'][1]:.1f}" if "load" in r else ""
             if r.get("rc"):
-                lines.append(f"| {case} | {prec} | failed | {r['message'][:120]} | | {_cpu(rows, prec)} | {load} |")
+                lines.append(
+                    f"| {case} | {prec} | failed | {r['message'][:120]} | | {_cpu(rows, prec)} | {load} |"
+                )
                 continue
             ref = f64[case] if not prec.startswith("f64") else {}
             vals = []
             if case == "hydrostatic":
                 lo, hi = r["floor_pressure_late"]
-                vals = [(f"floor pressure / rho g H - 1 at {info['hydrostatic_time']:g} s",
-                         _pct(r["floor_pressure_end"]), ref.get("floor_pressure_end"), "floor_pressure_end"),
-                        ("same, second half (min..max)", f"{_pct(lo)} .. {_pct(hi)}", None, None),
-                        ("largest speed / sqrt(g H), second half", f"{r['speed_late']:.2e}", None, None),
-                        ("water volume drift", _pct(r["volume_drift"], 4), None, None),
-                        ("particles moved from start, RMS / largest (dx)",
-                         f"{r['moved_rms_dx']:.3f} / {r['moved_max_dx']:.3f}", None, None),
-                        ("steps", str(r["steps"]), None, None)]
+                vals = [
+                    (
+                        f"floor pressure / rho g H - 1 at {info['hydrostatic_time']:g} s",
+                        _pct(r["floor_pressure_end"]),
+                        ref.get("floor_pressure_end"),
+                        "floor_pressure_end",
+                    ),
+                    ("same, second half (min..max)", f"{_pct(lo)} .. {_pct(hi)}", None, None),
+                    ("largest speed / sqrt(g H), second half", f"{r['speed_late']:.2e}", None, None),
+                    ("water volume drift", _pct(r["volume_drift"], 4), None, None),
+                    (
+                        "particles moved from start, RMS / largest (dx)",
+                        f"{r['moved_rms_dx']:.3f} / {r['moved_max_dx']:.3f}",
+                        None,
+                        None,
+                    ),
+                    ("steps", str(r["steps"]), None, None),
+                ]
             elif case == "dambreak":
                 diff = ""
                 if "Z" in ref and len(ref["Z"]) == len(r["Z"]):
-                    diff = f"front differs by at most {100 * np.max(np.abs(np.array(r['Z']) / ref['Z'] - 1)):.2f} %"
-                vals = [("front: mean abs error against Martin & Moyce, T 1-3", f"{100 * r['martin_moyce_error']:.2f} %",
-                         diff, None),
-                        ("front Z at T = 3", f"{r['Z'][-1]:.3f}", None, None),
-                        ("water volume drift", _pct(r["volume_drift"], 4), None, None),
-                        ("steps", str(r["steps"]), None, None)]
+                    worst = np.max(np.abs(np.array(r["Z"]) / ref["Z"] - 1))
+                    diff = f"front differs by at most {100 * worst:.2f} %"
+                vals = [
+                    (
+                        "front: mean abs error against Martin & Moyce, T 1-3",
+                        f"{100 * r['martin_moyce_error']:.2f} %",
+                        diff,
+                        None,
+                    ),
+                    ("front Z at T = 3", f"{r['Z'][-1]:.3f}", None, None),
+                    ("water volume drift", _pct(r["volume_drift"], 4), None, None),
+                    ("steps", str(r["steps"]), None, None),
+                ]
             elif case == "terzaghi":
                 per = ", ".join(f"{float(k):g}: {v:.4f}" for k, v in r["isochrone_errors"].items())
-                vals = [("largest isochrone error / u0", f"{r['isochrone_error']:.4f}",
-                         ref.get("isochrone_error"), "isochrone_error"), ("per Tv", per, None, None)]
+                vals = [
+                    (
+                        "largest isochrone error / u0",
+                        f"{r['isochrone_error']:.4f}",
+                        ref.get("isochrone_error"),
+                        "isochrone_error",
+                    ),
+                    ("per Tv", per, None, None),
+                ]
             elif case == "dupuit":
-                vals = [("q / q_Dupuit", f"{r['discharge_ratio']:.4f}", ref.get("discharge_ratio"), "discharge_ratio"),
-                        ("h1 / h2 (m)", f"{r['h1']:.4f} / {r['h2']:.4f}", None, None)]
+                vals = [
+                    (
+                        "q / q_Dupuit",
+                        f"{r['discharge_ratio']:.4f}",
+                        ref.get("discharge_ratio"),
+                        "discharge_ratio",
+                    ),
+                    ("h1 / h2 (m)", f"{r['h1']:.4f} / {r['h2']:.4f}", None, None),
+                ]
             for k, (what, val, other, key) in enumerate(vals):
                 cmp = other if isinstance(other, str) else ""
                 if key and other is not None and not isinstance(other, str):
                     cmp = f"{r[key] - other:+.2e}" if not prec.startswith("f64") else ""
                 cpu = _cpu(rows, prec) if k == 0 else ""
-                lines.append(f"| {case if k == 0 else ''} | {prec if k == 0 else ''} | {what} | {val} | {cmp} | "
-                             f"{cpu} | {load if k == 0 else ''} |")
+                lines.append(
+                    f"| {case if k == 0 else ''} | {prec if k == 0 else ''} | {what} | {val} | {cmp} | "
+                    f"{cpu} | {load if k == 0 else ''} |"
+                )
     return "\n".join(lines) + "\n"
 
 
@@ -276,8 +343,12 @@ def main(argv=None) -> int:
                 r.pop("positions", None)
                 res[case][prec + (f", {opts.label}" if opts.label else "")] = r
                 print(case, prec, {k: v for k, v in r.items() if k not in ("T", "Z")}, flush=True)
-    info = {"machine": machine(), "date": time.strftime("%Y-%m-%d"), "label": opts.label,
-            "hydrostatic_time": opts.hydrostatic_time}
+    info = {
+        "machine": machine(),
+        "date": time.strftime("%Y-%m-%d"),
+        "label": opts.label,
+        "hydrostatic_time": opts.hydrostatic_time,
+    }
     Path(opts.json).write_text(json.dumps({"info": info, "results": res}, indent=1))
     replace_section(Path(opts.out), "precision", markdown(res, info))
     print(f"wrote {opts.out} (section precision) and {opts.json}")

@@ -258,9 +258,9 @@ class WCSPHSolver(SolverCommon):
         self.time = 0.0
         self.timers = {k: 0.0 for k in ("update", "neighbours", "pairs")}
         self.red = np.zeros(_NRED)
-        # reductions of the kick and of the pair pass (with the soil's passes), written by the kernels straight
-        # into these host arrays (external-array arguments: no read-back launch, no per-element reads, which
-        # cost ~2.5 us each)
+        # reductions of the kick and of the pair pass (with the soil's passes), written by the kernels
+        # straight into these host arrays (external-array arguments: no read-back launch, no per-element
+        # reads, which cost ~2.5 us each)
         self.red_kick = np.zeros(2, self.np_fp)
         self.red_pairs = np.zeros(_NRED + (self.soil.nred if self.has_soil else 0), self.np_fp)
         self.last = {}
@@ -496,8 +496,8 @@ class WCSPHSolver(SolverCommon):
         pw = 0.0
         if r < 2.0 * hij:
             wij = kernels.w(r, hij, self.dim)
-            pw = walls.wall_pressure(self.p[i], self.rhof(i), self.g, xi - operators.rel(xi, self.xf(j), self.period),
-                                     xi)
+            xw = xi - operators.rel(xi, self.xf(j), self.period)
+            pw = walls.wall_pressure(self.p[i], self.rhof(i), self.g, xw, xi)
         return wij, pw
 
     @ti.kernel
@@ -522,7 +522,8 @@ class WCSPHSolver(SolverCommon):
         - forces with the predicted rho~, p~ of the view q: eq 34 (pressure; Morris viscosity with
           v^{n+1/2}), eq 36, eq 54 and gravity.
         Soil particles take their stress update in the same loop (soil_step.py). Reductions: kinetic energy,
-        max speed, water volume, min h/|a|, min h/c, non-finite count, first bad id, min h, air volume (returned).
+        max speed, water volume, min h/|a|, min h/c, non-finite count, first bad id, min h, air volume
+        (returned).
         With dt = 0 (initial_diagnostics) the density, pressure, h and XSPH correction stay as they are."""
         ke = 0.0
         vmax = 0.0
@@ -681,7 +682,8 @@ class WCSPHSolver(SolverCommon):
         self._k_mask()
         self.r_list = min(self.cell, 2.0 * self.hmax + self.skin)
         try:
-            self.grid.build_neighbour_lists(self.x, self.fmask, self.n, self.r_list, self.ids, in_place=reorder)
+            self.grid.build_neighbour_lists(self.x, self.fmask, self.n, self.r_list, self.ids,
+                                            in_place=reorder)
         except NeighbourOverflowError as exc:
             raise guard.neighbour_overflow_error(self.step_count, self.time, exc) from None
         self._k_after_build(dt, w[0], w[1])
