@@ -319,8 +319,8 @@ class NeighbourGrid:
 
         Call after `sort()` and `reorder()` of `x` and `mask`; or, with `in_place=False`, after `sort()` alone
         (the particles keep their indices, the lists are the same sets in another order). Rows with mask 0,
-        and particles in the sentinel cell, get no neighbours. Raises NeighbourOverflowError (naming the particle with the
-        most neighbours, `ids[index]` when `ids` is given) if a row exceeds `max_neighbours`.
+        and particles in the sentinel cell, get no neighbours. Raises NeighbourOverflowError (naming the
+        particle with the most neighbours, `ids[index]` when `ids` is given) if a row exceeds `max_neighbours`.
         """
         n = int(n)
         radius = float(radius)
