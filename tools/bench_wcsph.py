@@ -202,6 +202,12 @@ def replace_section(path: Path, name: str, text: str) -> None:
     path.write_text(new)
 
 
+def _shown(path: str) -> str:
+    """A config path as the tables show it: relative to the checkout when inside it, else its name."""
+    p = Path(path).resolve()
+    return str(p.relative_to(ROOT)) if p.is_relative_to(ROOT) else p.name
+
+
 def load_average() -> float:
     """1-minute load average of the machine (processes running or waiting for a core)."""
     return os.getloadavg()[0]
@@ -430,7 +436,7 @@ def main():
         "warmup": args.warmup,
         "steps": args.steps,
         "overrides": args.overrides,
-        "levee": args.levee,
+        "levee": _shown(args.levee),
     }
     out = Path(args.out)
     info["against"] = describe_checkout(args.against) if args.against else None
