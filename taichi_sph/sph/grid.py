@@ -245,13 +245,18 @@ class NeighbourGrid:
 
     # ------------------------------------------------------- neighbour lists
     @ti.kernel
-    def _build(self, x: ti.template(), mask: ti.template(), n: ti.i32, radius: float) -> ti.i32:
+    def _build(self, x: ti.template(), mask: ti.template(), n: ti.i32, radius: float,
+               in_place: ti.template()) -> ti.i32:
+        """in_place: the particle arrays are in cell order (`reorder` applied); else particle perm[k] sits at
+        its own index and the cells are walked through perm."""
         self._ovf_max[None] = 0
         r2max = radius * radius
         overflow = 0
         for i in range(n):
             cnt = 0
             c = self._cell_sorted[i]
+            if ti.static(not in_place):
+                c = self._cell[i]
             if mask[i] != 0 and c < self.num_cells:
                 # cell coordinates, last axis fastest
                 cc = ti.Vector.zero(ti.i32, ti.static(self.dim))
@@ -285,7 +290,10 @@ class NeighbourGrid:
                                 z = (cc[last] + zo - 1 + ti.static(self.ncell[last])) % ti.static(self.ncell[last])
                                 a = lin + z
                                 b = lin + z + 1
-                            for j in range(self.cell_start[a], self.cell_start[b]):
+                            for k in range(self.cell_start[a], self.cell_start[b]):
+                                j = k
+                                if ti.static(not in_place):
+                                    j = self.perm[k]
                                 if j != i:
                                     dx = rel(xi, x[j], ti.static(self.period))
                                     if dx.dot(dx) < r2max:
@@ -306,12 +314,13 @@ class NeighbourGrid:
             if self._raw_count[i] == self._ovf_max[None]:
                 ti.atomic_min(self._ovf_index[None], i)
 
-    def build_neighbour_lists(self, x, mask, n: int, radius: float, ids=None):
+    def build_neighbour_lists(self, x, mask, n: int, radius: float, ids=None, in_place: bool = True):
         """Fill `nbr` / `nbr_count` for rows i < n with mask[i] != 0: all j != i with |x_i - x_j| < radius.
 
-        Call after `sort()` and `reorder()` of `x` and `mask`. Rows with mask 0, and particles in the
-        sentinel cell, get no neighbours. Raises NeighbourOverflowError (naming the particle with the
-        most neighbours, `ids[index]` when `ids` is given) if a row exceeds `max_neighbours`.
+        Call after `sort()` and `reorder()` of `x` and `mask`; or, with `in_place=False`, after `sort()` alone
+        (the particles keep their indices, the lists are the same sets in another order). Rows with mask 0,
+        and particles in the sentinel cell, get no neighbours. Raises NeighbourOverflowError (naming the
+        particle with the most neighbours, `ids[index]` when `ids` is given) if a row exceeds `max_neighbours`.
         """
         n = int(n)
         radius = float(radius)
@@ -321,7 +330,7 @@ class NeighbourGrid:
             raise ValueError(f"build_neighbour_lists(n={n}) does not match the last sort(n={self._sorted_n})")
         if not 0.0 < radius <= self.cell_size:
             raise ValueError(f"radius {radius} must be positive and at most the cell size {self.cell_size}")
-        rows = self._build(x, mask, n, radius)
+        rows = self._build(x, mask, n, radius, bool(in_place))
         if rows > 0:
             self._find_overflow(n)
             index = int(self._ovf_index[None])

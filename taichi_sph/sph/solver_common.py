@@ -39,14 +39,17 @@ class SolverCommon:
         self.timers[key] += t1 - t0
         return t1
 
-    def _sort_and_reorder(self) -> None:
+    def _sort_and_reorder(self, reorder: bool = True) -> None:
         """Counting sort into the cells; particles outside the grid are taken out, counted, and reported
         to instability.out_of_domain (which stops the run or warns, per `guard.out_of_domain`); then every
-        particle array is put in cell order (memory locality of the neighbour loops)."""
+        particle array is put in cell order (memory locality of the neighbour loops), unless `reorder` is
+        False."""
         removed = self.grid.sort(self.x, self.active, self.n)
         if len(removed):
             ids = self.ids.to_numpy()[removed]
             self.removed_total += len(removed)
             out_of_domain(self.cfg, self.step_count, self.time, ids, self.removed_total)
+        if not reorder:
+            return
         for f in self.particle_fields:
             self.grid.reorder(f, self.n)

@@ -6,12 +6,12 @@ fluid pair terms skip them. Per step:
 1. stress update (`stress_at`), in the pair pass of solver.py at x^{n+1} with v^{n+1/2}: velocity
    gradient from soil neighbours and walls (virtual velocity of eq 50-51), strain and spin rates
    (eq 37-38), density by eq 48, effective stress by eq 42-45 (soil.py).
-2. force pass (`_k_forces`), after the pair pass: first the pore pressure p_i = sum_w V_j p_j W_ij /
+2. force pass (`_forces_pass`), after the pair pass: first the pore pressure p_i = sum_w V_j p_j W_ij /
    sum_w V_j W_ij from the water's new pressure (eq 5, Shepard-normalised) and the water presence
    (`_pore_at`), then eq 35 with eq 36, gravity, the pore-pressure force -grad p / rho_s (per unit
    soil mass, the (1 - n) grad p of the mixture theory over the soil's (1 - n) rho_s) and an optional
    damping (`wcsph.soil.fixed`: the skeleton is rigid, its acceleration and drag are zero).
-3. drag passes (`_k_drag_water`, `_k_drag_soil`, `_k_drag_water_after`): the water's mixture momentum
+3. drag passes (`_drag_water_pass`, `_drag_soil_pass`, `_drag_water_after_pass`): the water's mixture momentum
    inside the soil (pore part n under the water's forces, the rest moving with the soil) and eq 46-47
    between soil and water as pair forces F_ij = -F_ji (`_pair_drag`), implicit per pair (docs/biot.md),
    written to `adrag` which the next kick adds to the acceleration; their sum over all particles goes to
@@ -19,6 +19,8 @@ fluid pair terms skip them. Per step:
 
 Each pass reads of its neighbours only what the passes before it wrote: the force pass needs the new
 stresses of the soil around (step 1) and the water's new pressures; each drag pass needs the one before.
+Passes 2 and 3 are loops of the solver's pair kernel, after the fluid's loop (`passes`): one launch per step
+for all of them, and one buffer of reductions read once by the host.
 """
 
 import logging
@@ -34,7 +36,7 @@ from ..sph import kernels, operators, walls
 from ..switches import held_soil_ids
 from . import soil, terms
 
-_NRED_S = 6
+_NRED_S = 6  # kinetic energy, max speed, min h/|a|, min h/c, non-finite count, first bad id
 
 log = logging.getLogger("taichi_sph")
 
@@ -113,11 +115,11 @@ class SoilPasses:
         # the Biot drag force of eq 46-47 on each particle (N; N/m in 2D), the pair part only: the water's
         # n_i phi_s (g / k) (u - v_s) and the soil's C_s phi_w (u - v_s) times their masses (scratch)
         self.fdrag = ti.Vector.field(dim, float, ns)
-        # momentum check of the drag: sum over all particles of fdrag (dim) and the largest |fdrag|
-        self.red_drag = ti.Vector.field(dim + 1, float, ())
+        # reductions in the solver's buffer after its own: the force pass's _NRED_S, then the momentum check
+        # of the drag: the sum over all particles of fdrag (dim) and the largest |fdrag|
+        self.nred = _NRED_S + dim + 1
         # per water particle n_i, f_i = phi_s / sum_soil V_j W_ij and phi_s of the pair drag (scratch)
         self.wmix = ti.Vector.field(3, float, ns)
-        self.red_soil = ti.Vector.field(_NRED_S, float, ())
         # 1 for a particle of a fixed soil block, indexed by particle id (never reordered, no state)
         self.sfix = ti.field(ti.i32, n if self.block_fixed else 1)
         if self.block_fixed:
@@ -141,7 +143,6 @@ class SoilPasses:
         si = fl.s[i]
         xi = fl._pos(si)
         vi = fl._vel(si)
-        rhoi = si[fl.S_RHO]
         h = fl.h0
         L = ti.Matrix.zero(float, fl.dim, fl.dim)
         for k in range(fl.grid.nbr_count[i]):
@@ -172,7 +173,7 @@ class SoilPasses:
                                                self.t_cut, fl.dim, self.sin_psi, self.dilatant)
             self.sig[i] = sig
             self.eps_p[i] += dgam
-        fl.rho[i] = rhoi * (1.0 - L.trace() * dt)
+        fl.rho[i] = fl.rho[i] * (1.0 - ti.cast(L.trace() * dt, ti.f64))  # f64: small rates stay
         if ti.static(not fl.coupled):
             self.pore[i] = 0.0
             fl.p[i] = 0.0
@@ -182,10 +183,10 @@ class SoilPasses:
     def _pore_at(self, i):
         """Pore pressure at soil particle i from the water's pressure of this step, p_i = sum_w V_j p_j W_ij /
         sum_w V_j W_ij (eq 5, Shepard-normalised), and the water presence phi_w; the first of two walks over
-        i's neighbours in `_k_forces` (only i's own values are read there)."""
+        i's neighbours in `_forces_pass` (only i's own values are read there)."""
         fl = self.fl
         h = fl.h0
-        xi = fl.x[i]
+        xi = fl.xf(i)
         pn = 0.0
         pd = 0.0
         pdw = 0.0
@@ -194,13 +195,13 @@ class SoilPasses:
             kj = fl.kind[j]
             if kj != WATER and kj != WALL:
                 continue
-            rij = operators.rel(xi, fl.x[j], fl.period)
+            rij = operators.rel(xi, fl.xf(j), fl.period)
             r2 = rij.dot(rij)
             if r2 >= 4.0 * h * h:
                 continue
             wij = kernels.w(ti.sqrt(r2), h, fl.dim)
             if kj == WATER:
-                vj = fl.m[j] / fl.rho[j]
+                vj = fl.m[j] / fl.rhof(j)
                 pn += vj * fl.p[j] * wij
                 pd += vj * wij
             else:
@@ -214,11 +215,24 @@ class SoilPasses:
         # whose wall particles take part of the kernel support)
         self.phi_w[i] = ti.min(pd / ti.max(1.0 - pdw, 0.5), 1.0)
 
-    @ti.kernel
-    def _k_forces(self, dt: float):
+    @ti.func
+    def passes(self, dt):
+        """The soil's passes after the solver's pair loop, each a loop of the same kernel: forces, then the
+        drag (coupled scenes); returns their reductions (`nred`: the force pass's, then the drag's)."""
+        rs = self._forces_pass(dt)
+        rd = ti.Vector.zero(float, self.fl.dim + 1)
+        if ti.static(self.fl.coupled):
+            self._drag_water_pass(dt)
+            self._drag_soil_pass(dt)
+            rd = self._drag_water_after_pass(dt)
+        return ti.Vector([rs[k] for k in ti.static(range(_NRED_S))]
+                         + [rd[k] for k in ti.static(range(self.fl.dim + 1))])
+
+    @ti.func
+    def _forces_pass(self, dt):
         """Pore pressure and water presence (`_pore_at`), then eq 35 with eq 36, gravity, pore-pressure
         force, damping; reductions: kinetic energy, max speed, min h/|a|, min h/c, non-finite count, first
-        bad id."""
+        bad id (returned)."""
         fl = self.fl
         ke = 0.0
         vmax = 0.0
@@ -235,7 +249,7 @@ class SoilPasses:
                 si = fl.s[i]
                 xi = fl._pos(si)
                 vi = fl._vel(si)
-                rhoi = fl.rho[i]
+                rhoi = fl.rhof(i)
                 sigi = self.sig[i]
                 si_r = sigi / (rhoi * rhoi)
                 p_i, _s, _t = soil.mean_and_shear(sigi, fl.dim)
@@ -264,7 +278,7 @@ class SoilPasses:
                     kj = sj[fl.S_KIND]
                     if kj == SOIL:
                         mj = sj[fl.S_M]
-                        rhoj = fl.rho[j]
+                        rhoj = fl.rhof(j)
                         vij = vi - fl._vel(sj)
                         pij = terms.artificial_viscosity(vij, rij, r2, h, ci, 0.5 * (rhoi + rhoj), self.alpha_s, 0.0,
                                                          fl.av_eps)
@@ -303,7 +317,7 @@ class SoilPasses:
                             gradp += self.phi_w[i] * fl.vol0 * fl.rho_w * fl.g.dot(dxn) * gw
                     elif kj == WATER:  # noqa: SIM102 (compile-time if)
                         if ti.static(fl.coupled):
-                            gradp += sj[fl.S_M] / fl.rho[j] * (fl.p[j] - pore_i) * gw
+                            gradp += sj[fl.S_M] / fl.rhof(j) * (fl.p[j] - pore_i) * gw
                 acc += walls.wall_mirror_solve(accs, m_wall, -b_fac * g_t)
                 if ti.static(fl.coupled):  # G_i = gradp + phi_w m_wall G_i
                     pw = self.phi_w[i]
@@ -331,7 +345,7 @@ class SoilPasses:
                 if ti.math.isnan(val) or ti.math.isinf(val):
                     bad += 1.0
                     ti.atomic_min(first_bad, float(fl.ids[i]))
-        self.red_soil[None] = ti.Vector([ke, vmax, h_over_a, h_over_c, bad, first_bad])
+        return ti.Vector([ke, vmax, h_over_a, h_over_c, bad, first_bad])
 
     @ti.func
     def _movable(self, j):
@@ -346,22 +360,22 @@ class SoilPasses:
                 movable = False
         return movable
 
-    @ti.kernel
-    def _k_drag_water(self, dt: float):
+    @ti.func
+    def _drag_water_pass(self, dt):
         """Water side of the mixture momentum (docs/biot.md), before the drag. The water particles fill the
         whole volume, so inside the soil a water particle carries the volume-averaged velocity u = n v_f +
         (1 - n) v_s: its pore part n moves under n times the water's forces and the drag, its part (1 - n)
         moves with the soil. With the soil around it (presence phi_s, the soil's share of the support not
         taken by walls, <= 1; porosity n_bar, acceleration a_bar) and n_i = 1 - phi_s (1 - n_bar):
         A = n_i a_i + (1 - n_i) a_bar, held in `amix`; `adrag` gets A - a_i, the pair drag of eq 46-47 and
-        the soil's drag share follow in `_k_drag_soil` and `_k_drag_water_after`. `wmix` keeps n_i, the
+        the soil's drag share follow in `_drag_soil_pass` and `_drag_water_after_pass`. `wmix` keeps n_i, the
         weight factor f_i = phi_s / sum_soil V_j W_ij and phi_s for the pair drag."""
         fl = self.fl
         h = fl.h0
         ti.loop_config(serialize=fl.serial)
         for i in range(fl.n):
             if fl.fmask[i] == 1 and fl.kind[i] == WATER:
-                xi = fl.x[i]
+                xi = fl.xf(i)
                 ai = fl.a[i]
                 wsum = 0.0
                 nsum = 0.0
@@ -372,14 +386,14 @@ class SoilPasses:
                     kj = fl.kind[j]
                     if kj != SOIL and kj != WALL:
                         continue
-                    rij = operators.rel(xi, fl.x[j], fl.period)
+                    rij = operators.rel(xi, fl.xf(j), fl.period)
                     r2 = rij.dot(rij)
                     if r2 >= 4.0 * h * h:
                         continue
                     if kj == WALL:
                         wall += fl.vol0 * kernels.w(ti.sqrt(r2), h, fl.dim)
                         continue
-                    rhoj = fl.rho[j]
+                    rhoj = fl.rhof(j)
                     wij = kernels.w(ti.sqrt(r2), h, fl.dim) * fl.m[j] / rhoj
                     wsum += wij
                     nsum += wij * (1.0 - rhoj / self.rho_g)
@@ -407,11 +421,11 @@ class SoilPasses:
         function with the same (water, soil) arguments, so F_ij = -F_ji to rounding."""
         fl = self.fl
         f = ti.Vector.zero(float, fl.dim)
-        rij = operators.rel(fl.x[i], fl.x[j], fl.period)
+        rij = operators.rel(fl.xf(i), fl.xf(j), fl.period)
         r2 = rij.dot(rij)
         if r2 < 4.0 * fl.h0 * fl.h0:
             wm = self.wmix[i]
-            rhoj = fl.rho[j]
+            rhoj = fl.rhof(j)
             cs = 0.0
             if self._movable(j):
                 cs = (1.0 - rhoj / self.rho_g) * fl.rho_w / rhoj * self.g_over_k * self.phi_w[j]
@@ -422,8 +436,8 @@ class SoilPasses:
             f = -c / (1.0 + dt * lam) * qs
         return f
 
-    @ti.kernel
-    def _k_drag_soil(self, dt: float):
+    @ti.func
+    def _drag_soil_pass(self, dt):
         """Soil side of the Biot drag (eq 46-47, docs/biot.md): the sum of the pair forces -F_ij of
         `_pair_drag` over the water around, per unit soil mass; zero for a held skeleton. In a uniform
         interior this is C_s phi_w (u_bar - v_s) with C_s = n rho_w / rho_soil g / k."""
@@ -441,12 +455,12 @@ class SoilPasses:
                 self.fdrag[i] = fsum
                 self.adrag[i] = fsum / fl.m[i]
 
-    @ti.kernel
-    def _k_drag_water_after(self, dt: float):
+    @ti.func
+    def _drag_water_after_pass(self, dt):
         """Water side of the Biot drag: the pair forces F_ij of `_pair_drag` over the soil around, and the
         share (1 - n_i) that moves with the soil takes the soil's mean drag acceleration (docs/biot.md).
         Also the momentum check: the sum over all particles of the drag forces `fdrag` (the soil's from
-        `_k_drag_soil`) and the largest of them, into `red_drag`."""
+        `_drag_soil_pass`) and the largest of them (returned)."""
         fl = self.fl
         h = fl.h0
         tot = ti.Vector.zero(float, fl.dim)
@@ -466,10 +480,10 @@ class SoilPasses:
                     if fl.kind[j] != SOIL or fl.fmask[j] != 2:
                         continue
                     fsum += self._pair_drag(i, j, dt)
-                    rij = operators.rel(fl.x[i], fl.x[j], fl.period)
+                    rij = operators.rel(fl.xf(i), fl.xf(j), fl.period)
                     r2 = rij.dot(rij)
                     if r2 < 4.0 * h * h:
-                        wij = kernels.w(ti.sqrt(r2), h, fl.dim) * fl.m[j] / fl.rho[j]
+                        wij = kernels.w(ti.sqrt(r2), h, fl.dim) * fl.m[j] / fl.rhof(j)
                         wsum += wij
                         dbar += wij * self.adrag[j]
                 ad = self.adrag[i] + fsum / fl.m[i]
@@ -479,17 +493,13 @@ class SoilPasses:
                 self.adrag[i] = ad
                 tot += fsum
                 ti.atomic_max(big, fsum.norm())
-        out = ti.Vector.zero(float, fl.dim + 1)
-        for d in ti.static(range(fl.dim)):
-            out[d] = tot[d]
-        out[fl.dim] = big
-        self.red_drag[None] = out
+        return ti.Vector([tot[d] for d in ti.static(range(fl.dim))] + [big])
 
     # ------------------------------------------------------------------ host side
-    def forces(self, dt: float):
+    def after_passes(self, red):
+        """The host's part after the pair kernel: `red` the soil's reductions (`passes`)."""
         fl = self.fl
-        self._k_forces(dt)
-        r = self.red_soil[None].to_numpy()
+        r = red[:_NRED_S].copy()
         self.red_s = r
         if r[4] > 0:
             raise guard.non_finite_error(fl.step_count, fl.time, int(r[4]), int(r[5]),
@@ -497,10 +507,7 @@ class SoilPasses:
         fl.last["kinetic_energy"] += float(r[0])
         fl.last["max_speed"] = max(fl.last["max_speed"], float(r[1]))
         if fl.coupled:
-            self._k_drag_water(dt)
-            self._k_drag_soil(dt)
-            self._k_drag_water_after(dt)
-            r = self.red_drag[None].to_numpy()
+            r = red[_NRED_S:]
             fl.last["drag_sum"] = float(np.linalg.norm(r[:-1]))
             fl.last["drag_max"] = float(r[-1])
 

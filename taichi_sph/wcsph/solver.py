@@ -18,8 +18,8 @@ dt = Delta t^n starts from the accelerations a^n of the previous step (or `initi
    h^{n+1} = h^n (1 + D_i Delta t / d) (eq 52), the XSPH correction; and the accelerations a^{n+1} from
    rho~, p~: eq 34 (pressure, Morris viscosity), eq 36 (artificial viscosity), eq 54 (cohesion), gravity;
    a wall particle seen from fluid particle i has the velocity of eq 50-51, the density of i and the
-   pressure of i extrapolated hydrostatically; the reductions eq 49 and the diagnostics need, returned
-   as one small vector (the only transfer to the host per step besides the list-rebuild test).
+   pressure of i extrapolated hydrostatically; the reductions eq 49 and the diagnostics need, written into
+   a small host array (the only transfer to the host per step besides the list-rebuild test).
    The density the forces see differs from rho^{n+1} by order Delta t^3 d^3 rho / dt^3: the exact
    pair of passes (density, then forces with rho^{n+1}) needs every neighbour's new density before any
    force. With the previous pass's rate alone (rho~ = rho^n at D~ = 0, or D~ = D^{n-1/2}) the acoustic
@@ -31,7 +31,7 @@ p~ / rho~^2[, h~]): two contiguous loads per neighbour and step (the two passes 
 a scene does not use is compiled out with ti.static flags (air, cohesion, artificial viscosity, XSPH,
 variable h, soil, moving walls, periodic axes; their values come from taichi_sph/switches.py). Soil (eq 35,
 37-45) and the Biot drag (eq 46-47) join behind flags of their own: the soil's stress update in the loop of
-the pair pass, its forces and the drag in passes after it (soil_step.py, docs/biot.md).
+the pair pass, its forces and the drag in loops after it in the same kernel (soil_step.py, docs/biot.md).
 """
 
 import logging
@@ -59,7 +59,7 @@ log = logging.getLogger("taichi_sph")
 
 #: smoothing length bounds of eq 52, in units of h0 (the neighbour grid is sized for the upper one)
 H_MIN, H_MAX = 0.5, 1.1
-#: reductions returned by the force pass
+#: reductions of the fluid's pair pass (the soil's follow them in the same buffer, soil_step.NRED_SOIL)
 _NRED = 9
 #: largest timestep.cfl at which the one-pass step damps every acoustic mode: z = omega dt < 0.708 with the
 #: fastest lattice mode omega = c G_max, G_max dx = 0.901 (2D) / 0.923 (3D), dt = cfl 1.2 dx / c
@@ -174,20 +174,21 @@ class WCSPHSolver(SolverCommon):
         vec = ti.Vector.field
         self.s = vec(self.ns, float, n)
         self.q = vec(self.nq, float, n)
-        # reductions of the kick and force passes (reading a 0-d vector field costs ~7 us, a kernel's
-        # vector return value ~50 us)
-        self.red_kick = vec(2, float, ())
-        self.red_forces = vec(_NRED, float, ())
-        self.x = vec(dim, float, n)
+        # positions, density and smoothing length are f64 at either precision: each step adds to them an
+        # increment far below their f32 resolution (a seeping particle moves ~1e-8 m per step at x ~ 1 m,
+        # where f32 resolves 1.2e-7 m; the density of stiff pore water changes by ~1e-6 kg/m^3 per step
+        # against 6e-5), which f32 would round away (docs/performance_wcsph.md, "Precision"). The pair
+        # pass reads them through the packed views in the run's precision.
+        self.x = vec(dim, ti.f64, n)
         self.v = vec(dim, float, n)  # leap-frog velocity v^{n+1/2}
         self.a = vec(dim, float, n)
         self.xs = vec(dim, float, n)  # XSPH correction eq 53
         self.rate = vec(2, float, n)  # divergence of eq 25, last two pair passes: D^{n-1/2}, D^{n-3/2}
         self.normal = vec(dim, float, n)
-        self.x0 = vec(dim, float, n)  # positions at the last neighbour-list build
-        self.rho = ti.field(float, n)
+        self.x0 = vec(dim, ti.f64, n)  # positions at the last neighbour-list build
+        self.rho = ti.field(ti.f64, n)
         self.p = ti.field(float, n)
-        self.h = ti.field(float, n)
+        self.h = ti.field(ti.f64, n)
         self.m = ti.field(float, n)
         self.wdepth = ti.field(float, n)
         self.kind = ti.field(ti.i32, n)
@@ -204,7 +205,7 @@ class WCSPHSolver(SolverCommon):
         init = initial_state(cfg, scene, self.materials)
         self.np_fp = np.float64 if is_f64() else np.float32
         f = self.np_fp
-        self.x.from_numpy(scene.position.astype(f))
+        self.x.from_numpy(scene.position.astype(np.float64))
         self.normal.from_numpy(scene.normal.astype(f))
         self.kind.from_numpy(scene.kind.astype(np.int32))
         self.ids.from_numpy(scene.ids)
@@ -218,7 +219,7 @@ class WCSPHSolver(SolverCommon):
             active[self.inflow.reserve_ids()] = 0
             self.active.from_numpy(active)
         self.v.from_numpy(init["velocity"].astype(f))
-        self.rho.from_numpy(init["density"].astype(f))
+        self.rho.from_numpy(init["density"].astype(np.float64))
         self.p.from_numpy(init["pressure"].astype(f))
         self.m.from_numpy(init["mass"].astype(f))
         self.wdepth.from_numpy(init["wall_depth"].astype(f))
@@ -244,14 +245,24 @@ class WCSPHSolver(SolverCommon):
         self.r_list = 0.0  # list radius at the last build
         self.hmax = self.h0
         self.rebuilds = 0
+        #: particle arrays are put into cell order at every `reorder_every`-th list build (1: at every build;
+        #: measured in docs/performance_wcsph.md, "Cell order"); the builds in between walk the cells
+        #: through the sort's permutation
+        self.reorder_every = 1
+        self.searches = 0
         self.dt_prev = 0.0
         self.dt_prev2 = 0.0
         self.rates_known = 0  # pair passes behind the divergences in `rate` (at most 2)
         self.removed_total = 0
         self.step_count = 0
         self.time = 0.0
-        self.timers = {k: 0.0 for k in ("update", "neighbours", "pairs", "soil")}
+        self.timers = {k: 0.0 for k in ("update", "neighbours", "pairs")}
         self.red = np.zeros(_NRED)
+        # reductions of the kick and of the pair pass (with the soil's passes), written by the kernels
+        # straight into these host arrays (external-array arguments: no read-back launch, no per-element
+        # reads, which cost ~2.5 us each)
+        self.red_kick = np.zeros(2, self.np_fp)
+        self.red_pairs = np.zeros(_NRED + (self.soil.nred if self.has_soil else 0), self.np_fp)
         self.last = {}
 
     # ------------------------------------------------------------------ materials
@@ -299,6 +310,16 @@ class WCSPHSolver(SolverCommon):
 
     # ------------------------------------------------------------------ packed view
     @ti.func
+    def xf(self, i):
+        """Position of particle i in the run's precision (the field is f64)."""
+        return ti.cast(self.x[i], float)
+
+    @ti.func
+    def rhof(self, i):
+        """Density of particle i in the run's precision (the field is f64)."""
+        return ti.cast(self.rho[i], float)
+
+    @ti.func
     def _pos(self, sj):
         return ti.Vector([sj[d] for d in ti.static(range(self.dim))])
 
@@ -318,33 +339,34 @@ class WCSPHSolver(SolverCommon):
     def _pack_s(self, i):
         """View s of particle i: x^{n+1}, v^{n+1/2}, rho^n, m, kind[, h^n]."""
         for d in ti.static(range(self.dim)):
-            self.s[i][d] = self.x[i][d]
+            self.s[i][d] = ti.cast(self.x[i][d], float)
             self.s[i][self.S_V + d] = self.v[i][d]
-        self.s[i][self.S_RHO] = self.rho[i]
+        self.s[i][self.S_RHO] = ti.cast(self.rho[i], float)
         self.s[i][self.S_M] = self.m[i]
         self.s[i][self.S_KIND] = ti.cast(self.kind[i], float)
         if ti.static(self.variable_h):
-            self.s[i][self.S_H] = self.h[i]
+            self.s[i][self.S_H] = ti.cast(self.h[i], float)
 
     @ti.func
     def _pack_q(self, i, dt, w1, w2):
         """View q of particle i: the state the pair pass takes its pressures from. For a fluid particle the
         density predicted to the end of the step, rho~ = rho^n (1 - D~ dt) with the divergence extrapolated
         from the last two pair passes, D~ = w1 D^{n-1/2} + w2 D^{n-3/2} (docs/wcsph.md, "One step"), its
-        pressure p~ / rho~^2 by the equations of state and h~ by eq 52; rho^n and p^n with dt = 0."""
+        pressure p~ / rho~^2 by the equations of state and h~ by eq 52; rho^n and p^n with dt = 0. Computed
+        in f64 (rho and h are f64) and stored in the run's precision."""
         rho = self.rho[i]
         pr = self.p[i] / (rho * rho)
         h = self.h[i]
         if self.fmask[i] == 1 and dt > 0.0:
-            dd = (w1 * self.rate[i][0] + w2 * self.rate[i][1]) * dt
+            dd = ti.cast((w1 * self.rate[i][0] + w2 * self.rate[i][1]) * dt, ti.f64)
             rho = rho * (1.0 - dd)
             pr = self._eos_pressure(self.kind[i], rho) / (rho * rho)
             if ti.static(self.variable_h):
                 h = ti.min(ti.max(h * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
-        self.q[i][self.Q_RHO] = rho
-        self.q[i][self.Q_PR] = pr
+        self.q[i][self.Q_RHO] = ti.cast(rho, float)
+        self.q[i][self.Q_PR] = ti.cast(pr, float)
         if ti.static(self.variable_h):
-            self.q[i][self.Q_H] = h
+            self.q[i][self.Q_H] = ti.cast(h, float)
 
     # ------------------------------------------------------------------ kernels
     @ti.kernel
@@ -366,7 +388,7 @@ class WCSPHSolver(SolverCommon):
             self._pack_q(i, dt, w1, w2)
 
     @ti.kernel
-    def _k_kick_drift(self, dt: float, dt_prev: float, w1: float, w2: float):
+    def _k_kick_drift(self, dt: float, dt_prev: float, w1: float, w2: float, out: ti.types.ndarray()):
         """Leap-frog (eq 48): kick with a^n, drift with v^{n+1/2} plus the XSPH correction (eq 53); then the
         packed views of the pair pass (`_pack_s`, `_pack_q`). Returns the largest squared displacement
         since the last list build and the largest h the pair pass will use."""
@@ -389,7 +411,7 @@ class WCSPHSolver(SolverCommon):
                 self._pack_s(i)
                 self._pack_q(i, dt, w1, w2)
                 dd = operators.rel(xn, self.x0[i], self.period)
-                ti.atomic_max(d2max, dd.dot(dd))
+                ti.atomic_max(d2max, ti.cast(dd.dot(dd), float))
                 if ti.static(self.variable_h):
                     ti.atomic_max(hmax, self.q[i][self.Q_H])
             if ti.static(self.moving):  # noqa: SIM102 (compile-time if)
@@ -402,8 +424,9 @@ class WCSPHSolver(SolverCommon):
                         self.s[i][d] = xn[d]
                         self.s[i][self.S_V + d] = vb[d]
                     dd = operators.rel(xn, self.x0[i], self.period)
-                    ti.atomic_max(d2max, dd.dot(dd))
-        self.red_kick[None] = ti.Vector([d2max, hmax])
+                    ti.atomic_max(d2max, ti.cast(dd.dot(dd), float))
+        out[0] = d2max
+        out[1] = hmax
 
     @ti.kernel
     def _k_normalise(self, dt: float, w1: float, w2: float):
@@ -463,22 +486,34 @@ class WCSPHSolver(SolverCommon):
         extrapolated with hydrostatic correction (walls.wall_pressure). The step itself needs no wall
         pressure field: each fluid particle sees a wall particle with its own extrapolated value (see
         `_k_pairs`)."""
-        xi = self.x[i]
+        xi = self.xf(i)
         hi = self.h0
         if ti.static(self.variable_h):
-            hi = self.h[i]
+            hi = ti.cast(self.h[i], float)
         hij = self._h_pair(hi, self.s[j])
-        r = operators.rel(xi, self.x[j], self.period).norm()
+        r = operators.rel(xi, self.xf(j), self.period).norm()
         wij = 0.0
         pw = 0.0
         if r < 2.0 * hij:
             wij = kernels.w(r, hij, self.dim)
-            pw = walls.wall_pressure(self.p[i], self.rho[i], self.g, xi - operators.rel(xi, self.x[j], self.period),
-                                     xi)
+            xw = xi - operators.rel(xi, self.xf(j), self.period)
+            pw = walls.wall_pressure(self.p[i], self.rhof(i), self.g, xw, xi)
         return wij, pw
 
     @ti.kernel
-    def _k_pairs(self, dt: float):
+    def _k_pairs(self, dt: float, out: ti.types.ndarray()):
+        """The fluid's pair pass (`_fluid_pass`), then the soil's passes (soil_step.SoilPasses.passes): one
+        launch, loops one after the other; the reductions of all of them go into `out`."""
+        red = self._fluid_pass(dt)
+        for k in ti.static(range(_NRED)):
+            out[k] = red[k]
+        if ti.static(self.has_soil):
+            rs = self.soil.passes(dt)
+            for k in ti.static(range(self.soil.nred)):
+                out[_NRED + k] = rs[k]
+
+    @ti.func
+    def _fluid_pass(self, dt):
         """The pair pass at x^{n+1} with v^{n+1/2}, one walk over each fluid particle's neighbours for:
         - continuity: D_i = sum_j V_j (v_j - v_i) . grad_i W_ij (eq 25 in volume form, V_j = m_j / rho_j^n;
           walls with the virtual velocity of eq 50-51), rho^{n+1} = rho^n (1 - D_i dt) (eq 48),
@@ -487,7 +522,8 @@ class WCSPHSolver(SolverCommon):
         - forces with the predicted rho~, p~ of the view q: eq 34 (pressure; Morris viscosity with
           v^{n+1/2}), eq 36, eq 54 and gravity.
         Soil particles take their stress update in the same loop (soil_step.py). Reductions: kinetic energy,
-        max speed, water volume, min h/|a|, min h/c, non-finite count, first bad id, min h, air volume.
+        max speed, water volume, min h/|a|, min h/c, non-finite count, first bad id, min h, air volume
+        (returned).
         With dt = 0 (initial_diagnostics) the density, pressure, h and XSPH correction stay as they are."""
         ke = 0.0
         vmax = 0.0
@@ -600,17 +636,18 @@ class WCSPHSolver(SolverCommon):
                 acc += walls.wall_mirror_solve(accp, m_wall, hyd_t)
                 self.a[i] = acc
                 self.rate[i] = ti.Vector([div, self.rate[i][0]])
-                rho = rho_n
+                # density and h accumulate in f64 (the fields are f64), the EOS is evaluated there too
+                rho64 = rho_n
                 if dt > 0.0:
-                    dd = div * dt
-                    rho = rho_n * (1.0 - dd)
-                    p = self._eos_pressure(ki, rho)
-                    self.rho[i] = rho
-                    self.p[i] = p
+                    dd = ti.cast(div * dt, ti.f64)  # 1 - dd in f32 would round small rates away
+                    rho64 = rho_n * (1.0 - dd)
+                    self.rho[i] = rho64
+                    self.p[i] = ti.cast(self._eos_pressure(ki, rho64), float)
                     if ti.static(self.xsph_on):
                         self.xs[i] = self.xsph_eps * xs
                     if ti.static(self.variable_h):
-                        self.h[i] = ti.min(ti.max(si[self.S_H] * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
+                        self.h[i] = ti.min(ti.max(self.h[i] * (1.0 + dd / self.dim), self.h_lo), self.h_hi)
+                rho = ti.cast(rho64, float)
                 # reductions
                 voli = mi / rho
                 vs = vi + 0.5 * dt * acc  # synchronised velocity at this time
@@ -633,17 +670,20 @@ class WCSPHSolver(SolverCommon):
             if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if)
                 if self.fmask[i] == 2:
                     self.soil.stress_at(i, dt)
-        self.red_forces[None] = ti.Vector([ke, vmax, vol, h_over_a, h_over_c, bad, first_bad, hmin, vol_air])
+        return ti.Vector([ke, vmax, vol, h_over_a, h_over_c, bad, first_bad, hmin, vol_air])
 
     # ------------------------------------------------------------------ step
     def neighbour_search(self, dt: float = 0.0, w=(0.0, 0.0)):
         """Sort into cells, reorder every particle array, rebuild the lists with the Verlet skin; then the
         packed views for a pair pass over a step of length dt with the prediction weights w (`_weights`)."""
-        self._sort_and_reorder()
+        reorder = self.searches % self.reorder_every == 0
+        self.searches += 1
+        self._sort_and_reorder(reorder)
         self._k_mask()
         self.r_list = min(self.cell, 2.0 * self.hmax + self.skin)
         try:
-            self.grid.build_neighbour_lists(self.x, self.fmask, self.n, self.r_list, self.ids)
+            self.grid.build_neighbour_lists(self.x, self.fmask, self.n, self.r_list, self.ids,
+                                            in_place=reorder)
         except NeighbourOverflowError as exc:
             raise guard.neighbour_overflow_error(self.step_count, self.time, exc) from None
         self._k_after_build(dt, w[0], w[1])
@@ -653,23 +693,27 @@ class WCSPHSolver(SolverCommon):
         return prediction_weights(dt, self.dt_prev, self.dt_prev2, self.rates_known)
 
     def _pairs(self, dt: float):
-        self._k_pairs(dt)
+        """The pair pass and the soil's passes (one kernel), then their reductions: diagnostics, the
+        non-finite checks (the fluid's first)."""
+        self._k_pairs(dt, self.red_pairs)
         self.rates_known = min(self.rates_known + 1, 2)
-        self.red = self.red_forces[None].to_numpy()
+        self.red = self.red_pairs[:_NRED].copy()
         r = self.red
         self.last = {"kinetic_energy": float(r[0]), "max_speed": float(r[1]), "water_volume": float(r[2]),
                      "air_volume": float(r[8])}
         if r[5] > 0:
             raise guard.non_finite_error(self.step_count, self.time, int(r[5]), int(r[6]),
                                          "position, velocity, density or pressure")
+        if self.has_soil:
+            self.soil.after_passes(self.red_pairs[_NRED:])
 
     def step(self, dt: float) -> dict:
         t0 = _time.perf_counter()
         if self.moving:
             self.motion.set_step(self.time, self.time + dt)
         w = self._weights(dt)
-        self._k_kick_drift(dt, self.dt_prev, w[0], w[1])
-        d2max, hmax = self.red_kick[None].to_numpy()
+        self._k_kick_drift(dt, self.dt_prev, w[0], w[1], self.red_kick)
+        d2max, hmax = self.red_kick
         if self.variable_h:
             self.hmax = float(hmax)
         self.step_count += 1
@@ -684,10 +728,7 @@ class WCSPHSolver(SolverCommon):
         if self.normalised and self.step_count % self.normalise_every == 0:
             self._k_normalise(dt, w[0], w[1])
         self._pairs(dt)
-        t0 = self._tick("pairs", t0)
-        if self.has_soil:
-            self.soil.forces(dt)
-            self._tick("soil", t0)
+        self._tick("pairs", t0)
         self.dt_prev2 = self.dt_prev
         self.dt_prev = dt
         return self.last
@@ -698,8 +739,6 @@ class WCSPHSolver(SolverCommon):
         its forces, so that a^0 of the soil sees its pore pressure."""
         self.neighbour_search()
         self._pairs(0.0)
-        if self.has_soil:
-            self.soil.forces(0.0)
         return self.last
 
     def propose_dt(self) -> tuple[float, int]:
