@@ -180,6 +180,15 @@ class SoilPasses:
             self.phi_w[i] = 0.0
 
     @ti.func
+    def _neighbour(self, i, k, xi):
+        """The k-th listed neighbour j of particle i (at xi), its kind and r^2 = |x_i - x_j|^2 (minimum
+        image), read from the particle store (not the packed view)."""
+        fl = self.fl
+        j = fl.grid.nbr[i, k]
+        rij = operators.rel(xi, fl.xf(j), fl.period)
+        return j, fl.kind[j], rij.dot(rij)
+
+    @ti.func
     def _pore_at(self, i):
         """Pore pressure at soil particle i from the water's pressure of this step, p_i = sum_w V_j p_j W_ij /
         sum_w V_j W_ij (eq 5, Shepard-normalised), and the water presence phi_w; the first of two walks over
@@ -191,13 +200,8 @@ class SoilPasses:
         pd = 0.0
         pdw = 0.0
         for k in range(fl.grid.nbr_count[i]):
-            j = fl.grid.nbr[i, k]
-            kj = fl.kind[j]
-            if kj != WATER and kj != WALL:
-                continue
-            rij = operators.rel(xi, fl.xf(j), fl.period)
-            r2 = rij.dot(rij)
-            if r2 >= 4.0 * h * h:
+            j, kj, r2 = self._neighbour(i, k, xi)
+            if (kj != WATER and kj != WALL) or r2 >= 4.0 * h * h:
                 continue
             wij = kernels.w(ti.sqrt(r2), h, fl.dim)
             if kj == WATER:
@@ -382,13 +386,8 @@ class SoilPasses:
                 abar = ti.Vector.zero(float, fl.dim)
                 wall = 0.0
                 for k in range(fl.grid.nbr_count[i]):
-                    j = fl.grid.nbr[i, k]
-                    kj = fl.kind[j]
-                    if kj != SOIL and kj != WALL:
-                        continue
-                    rij = operators.rel(xi, fl.xf(j), fl.period)
-                    r2 = rij.dot(rij)
-                    if r2 >= 4.0 * h * h:
+                    j, kj, r2 = self._neighbour(i, k, xi)
+                    if (kj != SOIL and kj != WALL) or r2 >= 4.0 * h * h:
                         continue
                     if kj == WALL:
                         wall += fl.vol0 * kernels.w(ti.sqrt(r2), h, fl.dim)
