@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from taichi_sph.io.hdf5 import RunFile
+from taichi_sph.wcsph.failure import yield_sequence
 from taichi_sph.wcsph.flownet import harr_prism_ratio, prism_ratio
 
 SOIL = 2
@@ -73,6 +74,7 @@ def _sheetpile_heave(run_cli, tmp_path, head, name):
     water = (f"water=[{{min: [0.06, 0.0], max: [0.84, {head}]}}, {{min: [0.84, 0.0], max: [1.26, 0.24]}}]")
     r = run_cli("--config", "configs/sheetpile.yaml", "--variant", "coarse", "--set", "end_time=2.0",
                 "--set", "wcsph.soil.start_from=null", "--set", "obstacles.0.motion=null", "--set", water,
+                "--set", "wcsph.water.sound_speed=34.0",  # 10 x the free fall from the upstream side's 0.58 m
                 "--out", out, "--no-progress")
     assert r.returncode == 0, r.stderr
     with RunFile(out) as rf:
@@ -82,3 +84,94 @@ def _sheetpile_heave(run_cli, tmp_path, head, name):
     lift = np.asarray(level) - level[0]
     dh = float(np.mean(np.asarray(up)[tu > 0.5]) - np.mean(np.asarray(down)[td > 0.5]))
     return dh, float(lift[np.asarray(t) > 0.5].max()), float(lift[-1])
+
+
+def test_sheetpile_heaves_within_20_percent_of_terzaghi(run_cli, tmp_path):
+    """Terzaghi's prism criterion for the coarse sheet pile (dx 0.02, pile 6 cm thick, D = 0.06 m, bed
+    0.20 m): the flow net gives a mean excess head of 0.209 dH on the base of the prism D deep and D / 2
+    wide, so the sand beside the pile heaves at dH_c = 0.99 D / 0.209 = 0.284 m. Held at 0.8 dH_c the
+    surface over the width D beside the pile must not rise by 1 mm (the acceptance's heave), held at
+    1.2 dH_c it must (the acceptance's 20 %). Measured (head differences as the probes read them over
+    0.5-2 s): dH 0.226 m, largest rise 0.01 mm; dH 0.339 m, 3.8 / 5.2 / 6.5 mm at 1 / 1.5 / 2 s (still
+    rising). docs/sheetpile.md has the full rise at dx 0.01 and 0.02."""
+    dh_c = 0.99 * 0.06 / prism_ratio(0.54, 0.2, 0.06, 0.06, 0.0025, at=0.12)
+    assert abs(dh_c - 0.284) < 0.002
+    below = _sheetpile_heave(run_cli, tmp_path, round(0.24 + 0.8 * dh_c, 3), "below")
+    above = _sheetpile_heave(run_cli, tmp_path, round(0.24 + 1.2 * dh_c, 3), "above")
+    assert below[1] < 1e-3, below
+    assert above[2] > 1e-3, above
+
+
+def test_levee_first_yield_at_the_landside_toe(run_cli, tmp_path):
+    """configs/embankment.yaml at dx 0.02, shortened: stage 1 as shipped, stage 2 with k five times the
+    shipped 3 cm/s and the piston five times as fast (Darcy's law makes the seepage's time scale 1 / k, and
+    the drag of the river's flow on the riverside slope, (g / k) times its speed, keeps its size), 5.5 s
+    in place of ~27 s. The acceptance: the first particle past a plastic strain of 1e-2 lies within 3 dx
+    of the landside toe (2.26, 0). The first frame (every 0.25 s) with a particle past 1e-2 holds a few
+    particles at once on the lower landside slope; the most strained of them is the first. Measured: at
+    4.75 s, three particles, (2.13, 0.05), (2.21, 0.01) and (2.23, 0.01), the most strained (2.23, 0.01),
+    1.6 dx from the toe (the full run at the shipped k: 16.5 s, the same particle; dx 0.01: 11.0 s,
+    (2.245, 0.005), 1.6 dx; docs/levee.md); nothing on the riverside slope or the crest. Bound 3 dx:
+    the acceptance."""
+    s1, s2 = tmp_path / "s1.h5", tmp_path / "s2.h5"
+    r = run_cli("--config", "configs/embankment.yaml", "--variant", "geostatic", "--set", "dx=0.02",
+                "--out", s1, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    r = run_cli("--config", "configs/embankment.yaml", "--set", "dx=0.02", "--set", "end_time=5.5",
+                "--set", "output.every=0.25", "--set", "wcsph.soil.permeability=0.15",
+                "--set", "obstacles.0.motion.velocity=[0.06,0.0]", "--set", "obstacles.0.motion.ramp=0.4",
+                "--set", f"wcsph.soil.start_from.run={s1}", "--out", s2, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    seq = yield_sequence(str(s2), 1e-2)
+    first = seq["first"]
+    assert first is not None, "no particle yielded"
+    toe = np.array([2.26, 0.0])
+    assert np.linalg.norm(np.asarray(first["x0_max"]) - toe) < 3 * 0.02, first
+    assert all(x > 1.885 for x, _ in first["x0"]), first  # all on the landside slope
+
+
+def test_dry_levee_wetting_front_follows_boussinesq(run_cli, tmp_path):
+    """configs/embankment.yaml `dry` at dx 0.02, shortened as the first-yield test (k five times the
+    shipped, 0.15 m/s: the Boussinesq front's time scale is 1 / k), 4 s: the river (0.12 m, falling to
+    0.103 m as the levee takes in water) against the dry levee. The wetting front's foot (the farthest pore
+    water on the floor) must advance as the Boussinesq solution x_f = 1.62 sqrt(k integral(H dt) / S) for
+    the river level H(t) the probe reads; the advance is taken from 0.4 s, so the entry's place on the
+    sloping face drops out. S is the drainable porosity: the model's water particles fill the pores at full
+    volume, so S = 1 (a real sand drains n = 0.4: against that reference the model's front is 37 % short,
+    docs/levee.md). Measured: advance 0.182 m at 2.2 s (reference 0.175, +4 %), 0.275 m at 4 s (0.278,
+    -1 %); before ~2 s the wedge under the sloping face is still filling (+35 % at 1 s). Bound 20 % (the
+    acceptance) over 2-4 s. The advance is slower than linear: x_f = a + b t^p gives p = 0.37. And the
+    phreatic line at 1-2 s is convex downward (seed fig 16): it lies below the chord from where the river
+    meets the slope to the front (measured mean sag 10-12 mm at 1 and 2 s; straight by 4 s)."""
+    s1, s2 = tmp_path / "d1.h5", tmp_path / "d2.h5"
+    r = run_cli("--config", "configs/embankment.yaml", "--variant", "dry_geostatic", "--set", "dx=0.02",
+                "--out", s1, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    r = run_cli("--config", "configs/embankment.yaml", "--variant", "dry", "--set", "dx=0.02",
+                "--set", "end_time=4.0", "--set", "output.every=0.1", "--set", "wcsph.soil.permeability=0.15",
+                "--set", f"wcsph.soil.start_from.run={s1}", "--out", s2, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    from taichi_sph.wcsph.dupuit import boussinesq_front
+    from taichi_sph.wcsph.failure import wetting_front
+
+    wf = wetting_front(str(s2), 0.02, 1.26)
+    t, front = np.asarray(wf["time"]), np.asarray(wf["front"])
+    with RunFile(s2) as rf:
+        tr, hr = (np.asarray(v, float) for v in rf.probes()["river"])
+    integral = np.interp(t, tr, np.concatenate([[0.0], np.cumsum(0.5 * (hr[1:] + hr[:-1]) * np.diff(tr))]))
+    ref = boussinesq_front(0.15, 1.0, 1.0, integral)  # 1.62 sqrt(k integral(H dt) / S), S = 1
+    k0 = int(np.argmin(np.abs(t - 0.4)))
+    late = t >= 2.0 - 1e-9
+    err = (front[late] - front[k0]) / (ref[late] - ref[k0]) - 1
+    assert np.all(np.abs(err) < 0.2), err
+    # slower than linear: the speed over the second half of the window is below that of the first half
+    mid = int(np.argmin(np.abs(t - 2.2)))
+    assert (front[-1] - front[mid]) / (t[-1] - t[mid]) < (front[mid] - front[k0]) / (t[mid] - t[k0])
+    # convex downward at 1.5 s: from its highest point (the river's edge on the slope) to the front the
+    # line's mean lies below the chord (the column heights scatter by a row, 2 cm, at this dx)
+    h = np.asarray(wf["table"][int(np.argmin(np.abs(t - 1.5)))])
+    x = np.asarray(wf["columns"])[h > 0]
+    h = h[h > 0]
+    x, h = x[np.argmax(h):], h[np.argmax(h):]
+    sag = np.interp(x, [x[0], x[-1]], [h[0], h[-1]]) - h
+    assert sag[1:-1].mean() > 0, (x, h)

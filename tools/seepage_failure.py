@@ -126,15 +126,15 @@ def dry(a) -> dict:
         if late.any():
             out[f"largest_error_pct_{s_name}"] = float(100 * np.max(np.abs(adv[late] / ref[late] - 1.0)))
             out[f"final_error_pct_{s_name}"] = float(100 * (adv[-1] / ref[-1] - 1.0))
-    sel = ok & (t > 0)
-    if sel.sum() >= 3:  # x_f - x_e ~ t^p with the entry x_e fitted: p below 1 is slower than linear
+    if ok.sum() >= 4:  # x_f = a + b t^p fitted over t >= t_ref: p below 1 is an advance slower than linear
         best = None
-        for xe in np.linspace(a.entry - 0.5, float(front[sel].min()) - a.dx, 200):
-            p, c = np.polyfit(np.log(t[sel]), np.log(front[sel] - xe), 1)
-            res = np.sum((np.log(front[sel] - xe) - (p * np.log(t[sel]) + c)) ** 2)
-            if best is None or res < best[0]:
-                best = (res, float(p), float(xe))
-        out["advance_exponent"], out["fitted_entry"] = best[1], best[2]
+        for p in np.linspace(0.2, 1.5, 131):
+            A = np.c_[np.ones(ok.sum()), t[ok] ** p]
+            coef, res, *_ = np.linalg.lstsq(A, front[ok], rcond=None)
+            r = float(np.sum((A @ coef - front[ok]) ** 2))
+            if best is None or r < best[0]:
+                best = (r, float(p))
+        out["advance_exponent"] = best[1]
     cols = np.asarray(wf["columns"])
     shapes = []
     for ti in a.shape_times:
@@ -144,6 +144,10 @@ def dry(a) -> dict:
         if wet.size < 3:
             continue
         xs, hs = cols[wet], h[wet]
+        top = int(np.argmax(hs))  # the line from its highest point (where the river meets the slope) on
+        xs, hs = xs[top:], hs[top:]
+        if xs.size < 3:
+            continue
         # convex downward: the line lies below the chord from its entry (highest) to its front
         chord = np.interp(xs, [xs[0], xs[-1]], [hs[0], hs[-1]])
         shapes.append({"time": float(t[i]), "x": xs.tolist(), "h": hs.tolist(),
