@@ -17,7 +17,8 @@ the advance's exponent in time; the phreatic line's shape.
 sheetpile: the head difference at heave (the mean surface over the prism's width D up by 1 mm, probe
 `heave`), the mean excess head on the prism's base from the run's own pressures just before heave
 (probes `p_base_*`), and Terzaghi's critical head difference from that head and from the flow net.
-figure: soil coloured by plastic strain, water by pressure, the phreatic line drawn, one panel per time.
+figure: soil coloured by plastic strain (drawn over the water), water by pressure, the phreatic line (per
+soil column, the highest pore water) dashed; one panel per time.
 Each prints its numbers and, with --json FILE, writes them.
 """
 
@@ -199,8 +200,11 @@ def figure(a) -> dict:
         dx = rf.dx
         tt = np.asarray(rf.times, float)
         xlim = [float(v) for v in a.xlim.split(",")] if a.xlim else None
-        fig, axes = plt.subplots(len(times), 1, figsize=(a.width, a.panel * len(times)), squeeze=False)
-        for ax, ti in zip(axes[:, 0], times):
+        rows = -(-len(times) // a.cols)
+        fig, axes = plt.subplots(rows, a.cols, figsize=(a.width, a.panel * rows), squeeze=False)
+        for ax in axes.flat[len(times):]:
+            ax.set_visible(False)
+        for ax, ti in zip(axes.flat, times):
             i = int(np.argmin(np.abs(tt - ti)))
             pos = np.asarray(rf.field("position", i), float)
             act = np.asarray(rf.field("active", i), bool)
@@ -208,11 +212,11 @@ def figure(a) -> dict:
             s = kind == failure.SOIL
             eps = np.asarray(rf.field("plastic_strain", i), float)[s]
             pw = np.asarray(rf.field("pressure", i), float)[w]
-            ms = (72 * dx * a.width / (xlim[1] - xlim[0] if xlim else 1.0)) ** 2 * 0.5
-            so = ax.scatter(pos[s, 0], pos[s, -1], s=ms, marker="s", c=np.log10(np.maximum(eps, 1e-4)),
-                            cmap="YlOrBr", vmin=-4, vmax=0, linewidths=0)
+            ms = (72 * dx * a.width / a.cols / (xlim[1] - xlim[0] if xlim else 1.0)) ** 2 * 0.5
             wa = ax.scatter(pos[w, 0], pos[w, -1], s=0.35 * ms, c=pw / 1e3, cmap="Blues", vmin=0, vmax=a.pmax,
-                            linewidths=0, alpha=0.8)
+                            linewidths=0)
+            so = ax.scatter(pos[s, 0], pos[s, -1], s=ms, marker="s", c=np.log10(np.maximum(eps, 1e-4)),
+                            cmap="YlOrBr", vmin=-4, vmax=0, linewidths=0, alpha=0.75)
             x, top, h = failure.phreatic_line(pos, kind, act, dx)
             wet = h > 0
             ax.plot(x[wet], h[wet], "c--", lw=1.2)
@@ -222,7 +226,7 @@ def figure(a) -> dict:
                 ax.set_xlim(*xlim)
             ax.set_title(f"t = {tt[i]:.1f} s", fontsize=9, loc="left")
             ax.tick_params(labelsize=7)
-        fig.subplots_adjust(left=0.06, right=0.8, top=0.95, bottom=0.08, hspace=0.35)
+        fig.subplots_adjust(left=0.06, right=0.8, top=0.95, bottom=0.08, hspace=0.55)
         for cx, art, label in ((0.83, so, "log10 plastic strain"), (0.92, wa, "water pressure (kPa)")):
             cb = fig.colorbar(art, cax=fig.add_axes([cx, 0.15, 0.015, 0.7]))
             cb.set_label(label, fontsize=8)
@@ -267,6 +271,7 @@ def main() -> None:
     fg.add_argument("--pmax", type=float, default=1.5, help="top of the water pressure scale (kPa)")
     fg.add_argument("--width", type=float, default=8.0, help="figure width (inches)")
     fg.add_argument("--panel", type=float, default=1.5, help="height of one panel (inches)")
+    fg.add_argument("--cols", type=int, default=1, help="panels per row")
     fg.add_argument("--dpi", type=int, default=80)
     for p in (lv, dr, sp, fg):
         p.add_argument("--json", help="write the numbers to this file")
