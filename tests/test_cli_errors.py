@@ -75,8 +75,8 @@ CASES = [
     case("inside-soil-in-isph", ["--set", "water.0.inside_soil=true"], ["'water[0].inside_soil'", "wcsph_biot"]),
     case("inside-soil-without-soil", ["--config", "configs/dambreak_wcsph.yaml", "--set", "water.0.inside_soil=true"],
          ["'water[0].inside_soil'", "soil_blocks"]),
-    case("inside-soil-off-the-soil", ["--config", "configs/embankment.yaml", "--variant", "geostatic", "--set",
-                                      "water=[{min: [0.06, 0.0], max: [0.2, 0.08], inside_soil: true}]"],
+    case("inside-soil-off-the-soil", ["--config", "configs/embankment.yaml", "--variant", "geostatic",
+                                      "--set", "water=[{min: [0.06, 0.0], max: [0.2, 0.08], inside_soil: true}]"],
          ["'water[0].inside_soil'", "overlaps no soil block"]),
     case("obstacle-ramp-with-oscillation",
          ["--set", "obstacles=[{min: [0.1, 0.1], max: [0.15, 0.15], motion: {amplitude: [0.01, 0], period: 1, "
@@ -85,7 +85,8 @@ CASES = [
          ["--set", "obstacles=[{min: [0.1, 0.1], max: [0.15, 0.15], motion: {velocity: [0.1, 0], stop: 0.5, "
           "ramp: 0.5}}]"], ["'obstacles[0].motion.ramp'", "0.25"]),
     case("water-outside-and-inside-soil", ["--config", "configs/embankment.yaml", "--variant", "geostatic",
-                                           "--set", "water.0.inside_soil=true", "--set", "water.0.outside_soil=true"],
+                                           "--set", "water.0.inside_soil=true",
+                                           "--set", "water.0.outside_soil=true"],
          ["'water[0].outside_soil'"]),
     case("water-table-x-not-increasing", ["--set", "water.0.table=[[0.2, 0.1], [0.1, 0.0]]"],
          ["'water[0].table'", "increase"]),

@@ -59,8 +59,8 @@ def test_levee_stage1_stands(run_cli, tmp_path, dx):
     if dx == 0.02:
         s2 = tmp_path / "s2.h5"
         r = run_cli("--config", "configs/embankment.yaml", "--set", f"dx={dx}", "--set", "end_time=0.5",
-                    "--set", "obstacles.0.motion.velocity=[0.0,0.0]", "--set", f"wcsph.soil.start_from.run={s1}",
-                    "--out", s2, "--no-progress")
+                    "--set", "obstacles.0.motion.velocity=[0.0,0.0]",
+                    "--set", f"wcsph.soil.start_from.run={s1}", "--out", s2, "--no-progress")
         assert r.returncode == 0, r.stderr
         disp2, eps2 = _soil_end_state(s2)
         assert disp2 < 1e-3 and eps2 - eps < 5e-4, (disp2, eps, eps2)

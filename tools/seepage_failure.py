@@ -1,9 +1,9 @@
 """Numbers and pictures of the seepage-failure cases (docs/levee.md, docs/sheetpile.md) from their run files.
 
-    python tools/seepage_failure.py levee STAGE1.h5 STAGE2.h5 [--toe 2.0] [--crest 0.15] [--dx 0.01]
-    python tools/seepage_failure.py dry RUN.h5 [--entry 1.0] [--k 0.02] [--porosity 0.4] [--dx 0.01]
-    python tools/seepage_failure.py sheetpile RUN.h5 [--embed 0.06] [--bed 0.2] [--length 0.57] [--at 0.15]
-    python tools/seepage_failure.py figure RUN.h5 --times 0,20,40 --out PNG [--xlim 0.9,2.3]
+    python tools/seepage_failure.py levee STAGE1.h5 STAGE2.h5 [--toe 2.26] [--dx 0.01]
+    python tools/seepage_failure.py dry RUN.h5 [--entry 1.26] [--toe 2.26] [--k 0.03] [--porosity 0.4]
+    python tools/seepage_failure.py sheetpile RUN.h5 [--embed 0.06] [--bed 0.2] [--length 0.54] [--at 0.12]
+    python tools/seepage_failure.py figure RUN.h5 --times 0,20,40 --out PNG [--xlim 1.1,2.76] [--cols 1]
 
 levee: stage 1's largest displacement and plastic strain; stage 2's first yielded particle (plastic
 strain > 1e-2) and its distance from the landside toe, the highest yielded point over time and how far it
@@ -62,7 +62,8 @@ def levee(a) -> dict:
         out["first_yield_time"] = first["time"]
         out["first_yield_points"] = pts.tolist()
         out["first_yield_most_strained"] = first["x0_max"]
-        out["first_yield_dist_to_landside_toe_dx"] = float(np.linalg.norm(np.asarray(first["x0_max"]) - toe) / a.dx)
+        d_max = np.linalg.norm(np.asarray(first["x0_max"]) - toe)
+        out["first_yield_dist_to_landside_toe_dx"] = float(d_max / a.dx)
         out["first_yield_farthest_from_toe_dx"] = float(d.max() / a.dx)
     t = np.asarray(seq["time"])
     top = np.asarray(seq["top_z"])
@@ -81,7 +82,7 @@ def levee(a) -> dict:
     out["yield_top"] = [[float(ti), float(zi), float(xi)] for ti, zi, xi in
                         zip(t[seen], top[seen], np.asarray(seq["top_x"])[seen])]
     climb = seen & (t <= t_over)
-    if climb.any():  # monotone within 2 dx: the running maximum never exceeds a later reading by more than 2 dx
+    if climb.any():  # monotone within 2 dx: the running maximum exceeds no later reading by more than 2 dx
         run_max = np.maximum.accumulate(top[climb])
         out["yield_top_largest_fall_back_dx"] = float(np.max(run_max - top[climb]) / a.dx)
         out["yield_top_before_overflow"] = float(top[climb].max())
@@ -169,7 +170,8 @@ def sheetpile(a) -> dict:
     dh = np.interp(th, tu, hu) - np.interp(th, td, hd)
     out = {"heave_time": float(th[up[0]]) if up.size else None, "dH_max": float(dh.max())}
     step = max(1, len(th) // 40)
-    out["dH_series"] = [[float(x), float(y), float(z)] for x, y, z in zip(th[::step], dh[::step], lift[::step])]
+    out["dH_series"] = [[float(x), float(y), float(z)]
+                        for x, y, z in zip(th[::step], dh[::step], lift[::step])]
     base = a.bed - a.embed
     tb, ha = failure.excess_head_on_base(a.run, names, base, "h_downstream")
     ratio = np.interp(th, tb, ha) / np.where(np.abs(dh) > 1e-9, dh, np.nan)
@@ -241,15 +243,15 @@ def main() -> None:
     lv = sub.add_parser("levee")
     lv.add_argument("stage1")
     lv.add_argument("stage2")
-    lv.add_argument("--toe", type=float, default=2.0, help="x of the landside toe (m)")
+    lv.add_argument("--toe", type=float, default=2.26, help="x of the landside toe (m)")
     lv.add_argument("--dx", type=float, default=0.01)
     dr = sub.add_parser("dry")
     dr.add_argument("run")
-    dr.add_argument("--entry", type=float, default=1.0, help="x of the riverside toe (m): the front is sought beyond")
-    dr.add_argument("--toe", type=float, default=2.0, help="x of the landside toe (m)")
-    dr.add_argument("--k", type=float, default=0.02, help="hydraulic conductivity (m/s)")
+    dr.add_argument("--entry", type=float, default=1.26, help="riverside toe x (m)")
+    dr.add_argument("--toe", type=float, default=2.26, help="x of the landside toe (m)")
+    dr.add_argument("--k", type=float, default=0.03, help="hydraulic conductivity (m/s)")
     dr.add_argument("--porosity", type=float, default=0.4)
-    dr.add_argument("--t-ref", dest="t_ref", type=float, default=2.0, help="reference time of the advance (s)")
+    dr.add_argument("--t-ref", dest="t_ref", type=float, default=2.0, help="the advance's start time (s)")
     dr.add_argument("--shape-times", dest="shape_times", type=lambda s: [float(v) for v in s.split(",")],
                     default=[5.0, 10.0, 20.0])
     dr.add_argument("--dx", type=float, default=0.01)
@@ -257,9 +259,9 @@ def main() -> None:
     sp.add_argument("run")
     sp.add_argument("--embed", type=float, default=0.06, help="pile embedment D (m)")
     sp.add_argument("--bed", type=float, default=0.2, help="bed depth (m)")
-    sp.add_argument("--length", type=float, default=0.57, help="bed length between its end walls (m)")
-    sp.add_argument("--at", type=float, default=0.15, help="pile's upstream face from the bed's upstream end (m)")
-    sp.add_argument("--pile", type=float, default=0.04, help="pile thickness (m)")
+    sp.add_argument("--length", type=float, default=0.54, help="bed length between its end walls (m)")
+    sp.add_argument("--at", type=float, default=0.12, help="the pile's upstream face from the bed's end (m)")
+    sp.add_argument("--pile", type=float, default=0.03, help="pile thickness (m)")
     sp.add_argument("--gs", type=float, default=2.65)
     sp.add_argument("--porosity", type=float, default=0.4)
     fg = sub.add_parser("figure")

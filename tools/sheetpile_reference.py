@@ -5,10 +5,11 @@ map of a thin pile in a deep bed).
 Prints the mean excess head ratio h_a / dH on the base of Terzaghi's prism (depth D, width D / 2 beside
 the pile's downstream face), gamma' / gamma_w = (Gs - 1) (1 - n), the critical head difference
 dH_c = (gamma' / gamma_w) D / (h_a / dH) and the exit gradient at the pile's downstream face.
-Defaults: configs/sheetpile.yaml's bed (0.57 m long from its upstream end wall, 0.20 m deep, the pile
-0.04 m thick with its upstream face 0.15 m from that wall, driven D = 0.06 m).
+Defaults: configs/sheetpile.yaml's bed (0.54 m long from its upstream end wall, 0.20 m deep, the pile
+0.03 m thick with its upstream face 0.12 m from that wall, driven D = 0.06 m; the `coarse` variant's pile
+is 0.06 m thick: --pile 0.06).
 
-    python tools/sheetpile_reference.py [--length 0.57] [--depth 0.2] [--embed 0.06] [--pile 0.04] [--at 0.15]
+    python tools/sheetpile_reference.py [--length 0.54] [--depth 0.2] [--embed 0.06] [--pile 0.03] [--at 0.12]
 """
 
 from __future__ import annotations
@@ -26,11 +27,11 @@ from taichi_sph.wcsph.flownet import critical_head_difference, harr_prism_ratio,
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--length", type=float, default=0.57, help="bed length between its end walls (m)")
+    ap.add_argument("--length", type=float, default=0.54, help="bed length between its end walls (m)")
     ap.add_argument("--depth", type=float, default=0.2, help="bed depth T (m)")
     ap.add_argument("--embed", type=float, default=0.06, help="pile embedment D (m)")
-    ap.add_argument("--pile", type=float, default=0.04, help="pile thickness (m)")
-    ap.add_argument("--at", type=float, default=0.15, help="pile's upstream face from the bed's upstream end (m)")
+    ap.add_argument("--pile", type=float, default=0.03, help="pile thickness (m)")
+    ap.add_argument("--at", type=float, default=0.12, help="the pile's upstream face from the bed's end (m)")
     ap.add_argument("--gs", type=float, default=2.65, help="grain specific gravity Gs")
     ap.add_argument("--porosity", type=float, default=0.4, help="porosity n")
     ap.add_argument("--h", type=float, default=0.0025, help="grid spacing (m)")
@@ -44,8 +45,9 @@ def main() -> None:
     print(f"grid {head.shape[1]} x {head.shape[0]} (h = {a.h} m); prism base at z = {base:.4f} m")
     print(f"mean excess head on the prism's base h_a / dH = {ratio:.4f} (thin pile, infinite depth: "
           f"{harr_prism_ratio():.4f})")
-    print(f"gamma' / gamma_w = {(a.gs - 1) * (1 - a.porosity):.4f}; Terzaghi's critical head difference dH_c = "
-          f"{critical_head_difference(ratio, a.embed, a.gs, a.porosity):.4f} m")
+    dh_c = critical_head_difference(ratio, a.embed, a.gs, a.porosity)
+    print(f"gamma' / gamma_w = {(a.gs - 1) * (1 - a.porosity):.4f}; Terzaghi's critical head difference "
+          f"dH_c = {dh_c:.4f} m")
     print(f"exit gradient at the pile's downstream face i_exit / dH = {i_exit:.3f} 1/m")
 
 

@@ -38,8 +38,8 @@ def yield_sequence(path: str, threshold: float = 1e-2) -> dict:
                 out["top_z"].append(float(x[k, -1]))
                 out["top_x"].append(float(x[k, 0]))
                 if out["first"] is None:
-                    out["first"] = {"time": float(rf.times[i]), "x0": x0[y].tolist(), "strain": eps[y].tolist(),
-                                    "x0_max": x0[int(np.argmax(eps))].tolist()}
+                    out["first"] = {"time": float(rf.times[i]), "x0": x0[y].tolist(),
+                                    "strain": eps[y].tolist(), "x0_max": x0[int(np.argmax(eps))].tolist()}
             else:
                 out["top_z"].append(float("nan"))
                 out["top_x"].append(float("nan"))
