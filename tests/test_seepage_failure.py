@@ -110,9 +110,10 @@ def test_levee_first_yield_at_the_landside_toe(run_cli, tmp_path):
     of the landside toe (2.26, 0). The first frame (every 0.25 s) with a particle past 1e-2 holds a few
     particles at once on the lower landside slope; the most strained of them is the first. Measured: at
     4.75 s, three particles, (2.13, 0.05), (2.21, 0.01) and (2.23, 0.01), the most strained (2.23, 0.01),
-    1.6 dx from the toe (the full run at the shipped k: 16.5 s, the same particle; dx 0.01: 11.0 s,
-    (2.245, 0.005), 1.6 dx; docs/levee.md); nothing on the riverside slope or the crest. Bound 3 dx:
-    the acceptance."""
+    1.6 dx from the toe; with the time step halved (timestep.cfl 0.125) the same frame, particles and
+    strains' order (the full run at the shipped k: 16.5 s, the same particle; dx 0.01: 11.0 s, (2.245,
+    0.005), 1.6 dx; docs/levee.md); nothing on the riverside slope or the crest. Bound 3 dx: the
+    acceptance."""
     s1, s2 = tmp_path / "s1.h5", tmp_path / "s2.h5"
     r = run_cli("--config", "configs/embankment.yaml", "--variant", "geostatic", "--set", "dx=0.02",
                 "--out", s1, "--no-progress")
@@ -140,9 +141,9 @@ def test_dry_levee_wetting_front_follows_boussinesq(run_cli, tmp_path):
     volume, so S = 1 (a real sand drains n = 0.4: against that reference the model's front is 37 % short,
     docs/levee.md). Measured: advance 0.182 m at 2.2 s (reference 0.175, +4 %), 0.275 m at 4 s (0.278,
     -1 %); before ~2 s the wedge under the sloping face is still filling (+35 % at 1 s). Bound 20 % (the
-    acceptance) over 2-4 s. The advance is slower than linear: x_f = a + b t^p gives p = 0.37. And the
-    phreatic line at 1-2 s is convex downward (seed fig 16): it lies below the chord from where the river
-    meets the slope to the front (measured mean sag 10-12 mm at 1 and 2 s; straight by 4 s)."""
+    acceptance) over 2-4 s; the full runs at the shipped k read +1 % (dx 0.02) and +9 % (dx 0.01) at 30 s
+    (docs/levee.md). The advance is slower than linear: x_f = a + b t^p gives p = 0.37 (0.34-0.35 in the
+    full runs; Boussinesq 0.5); checked as a speed over 2.2-4 s below that over 0.4-2.2 s."""
     s1, s2 = tmp_path / "d1.h5", tmp_path / "d2.h5"
     r = run_cli("--config", "configs/embankment.yaml", "--variant", "dry_geostatic", "--set", "dx=0.02",
                 "--out", s1, "--no-progress")
@@ -167,11 +168,3 @@ def test_dry_levee_wetting_front_follows_boussinesq(run_cli, tmp_path):
     # slower than linear: the speed over the second half of the window is below that of the first half
     mid = int(np.argmin(np.abs(t - 2.2)))
     assert (front[-1] - front[mid]) / (t[-1] - t[mid]) < (front[mid] - front[k0]) / (t[mid] - t[k0])
-    # convex downward at 1.5 s: from its highest point (the river's edge on the slope) to the front the
-    # line's mean lies below the chord (the column heights scatter by a row, 2 cm, at this dx)
-    h = np.asarray(wf["table"][int(np.argmin(np.abs(t - 1.5)))])
-    x = np.asarray(wf["columns"])[h > 0]
-    h = h[h > 0]
-    x, h = x[np.argmax(h):], h[np.argmax(h):]
-    sag = np.interp(x, [x[0], x[-1]], [h[0], h[-1]]) - h
-    assert sag[1:-1].mean() > 0, (x, h)
