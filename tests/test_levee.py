@@ -1,6 +1,7 @@
 """Mode wcsph_biot, levees (seed 002 sections 3.4-3.5): two-stage runs (a geostatic stage seeds the next),
-the river inflow, steady seepage through a rigid levee against Dupuit, and where a saturated embankment
-first yields."""
+the river inflow, steady seepage through a rigid levee against Dupuit, water tables and the Boussinesq
+wetting front. The failure sequences of configs/embankment.yaml and configs/sheetpile.yaml are in
+tests/test_seepage_failure.py."""
 
 import numpy as np
 import pytest
@@ -200,66 +201,6 @@ def test_rigid_levee_seepage_dupuit(run_cli, tmp_path):
     assert abs(m["ratio"] - 1) < 0.10, m
     q = section_discharge(out, np.arange(0.615, 0.74, 0.01), t_from=0.3) / m["q_dupuit"]
     assert np.abs(q - 1).max() < 0.10, q
-
-
-def _first_yield(path, growth=1e-3):
-    """Start positions of the ten most strained soil particles in the first frame in which some particle's
-    plastic strain has grown by more than `growth` over the run's first frame (None if none has)."""
-    with RunFile(path) as rf:
-        soil = rf.kind == SOIL
-        x0 = rf.field("position", 0)[soil]
-        e0 = rf.field("plastic_strain", 0)[soil]
-        for i in range(rf.n_frames):
-            de = rf.field("plastic_strain", i)[soil] - e0
-            if (de > growth).any():
-                return x0[np.argsort(-de)[:10]]
-    return None
-
-
-def test_embankment_first_yield_at_landside_toe(run_cli, tmp_path):
-    """configs/embankment.yaml, coarse, the levee wetted throughout below 0.08 m (`water[k].inside_soil`;
-    seed fig 15 starts from a saturated levee): stage 1 (`wetted`, K0 start, damping 20 1/s, 0.1 s) and
-    stage 2 (`wetted_flood`, from its end, river rising, k = 2 cm/s, 0.1 s). In each stage, the first
-    frame in which some particle's plastic strain has grown by more than 1e-3 over the stage's start: its
-    ten most strained particles must lie within 0.125 m (a third of the landside slope's 0.375 m base)
-    of the landside toe (1.15, 0) (seed fig 15: slip failure starts at the landside toe). Ten particles
-    in one lattice row span 10 dx, so ten on the floor row next to the toe reach 0.105 m from it; the
-    riverside toe and the crest lie 0.8 m and 0.4 m away.
-    Measured (frame 0.05 s of each stage): all ten on the floor row at x 1.045-1.138 m; a band of strain
-    > 1e-2 runs from there to the landside crest corner (a slip surface).
-
-    Why: the landside slope below the phreatic level is a seepage face; with seepage parallel to it a
-    slope stands only below atan(gamma' sin(phi) / gamma_sat) = atan(0.5 x 990 / 1990) = 13.9 deg (phi = 30
-    deg, sin(phi) the friction coefficient of a non-dilatant material in simple shear, docs/biot.md), and
-    this slope is 21.8 deg (the riverside toe, submerged, needs only 21.8 < phi* = atan(sin phi) = 26.6
-    deg). The yield therefore starts in stage 1, before the river rises. Control, the same wetted levee with 1:6 slopes
-    (9.5 deg < 13.9 deg, crest 0.10 m high): no particle within 0.3 m of its landside toe yields
-    (measured: none east of x 0.9 m, toe at 1.375 m), so the localisation is the seepage face's, not the
-    floor's or the K0 start's."""
-    s1, s2, s3 = tmp_path / "w1.h5", tmp_path / "w2.h5", tmp_path / "flat.h5"
-    r = run_cli("--config", "configs/embankment.yaml", "--variant", "wetted", "--set", "end_time=0.1",
-                "--out", s1, "--no-progress")
-    assert r.returncode == 0, r.stderr
-    r = run_cli("--config", "configs/embankment.yaml", "--variant", "wetted_flood",
-                "--set", f"wcsph.soil.start_from.run={s1}", "--set", "wcsph.soil.permeability=0.02",
-                "--set", "end_time=0.1", "--out", s2, "--no-progress")
-    assert r.returncode == 0, r.stderr
-    for path in (s1, s2):
-        first = _first_yield(path)
-        assert first is not None, f"no particle yielded in {path.name}"
-        dist = np.linalg.norm(first - np.array([1.15, 0.0]), axis=1)
-        assert (dist < 0.125).all(), (path.name, first)
-    r = run_cli("--config", "configs/embankment.yaml", "--variant", "wetted", "--set", "end_time=0.1",
-                "--set", "soil_blocks[0].toe=[0.075,1.375]", "--set", "soil_blocks[0].top=0.1",
-                "--set", "water[1].min=[0.075,0.0]", "--set", "water[1].max=[1.375,0.08]",
-                "--out", s3, "--no-progress")
-    assert r.returncode == 0, r.stderr
-    with RunFile(s3) as rf:
-        soil = rf.kind == SOIL
-        x0 = rf.field("position", 0)[soil]
-        de = rf.field("plastic_strain", rf.n_frames - 1)[soil] - rf.field("plastic_strain", 0)[soil]
-    near_toe = np.linalg.norm(x0 - np.array([1.375, 0.0]), axis=1) < 0.3
-    assert near_toe.sum() > 20 and de[near_toe].max() < 1e-3, (near_toe.sum(), de[near_toe].max())
 
 
 def test_water_table_cuts_a_block_to_a_phreatic_line(tmp_path):

@@ -34,7 +34,7 @@ CASES = [
     ("dambreak_wcsph", "dambreak_wcsph", ["--set", "end_time=0.003"]),
     ("darcy_column", "darcy_column", ["--set", "end_time=0.02"]),
     ("embankment_geostatic", "embankment", ["--variant", "geostatic", "--set", "end_time=0.003"]),
-    ("embankment_dry", "embankment", ["--variant", "dry", "--set", "end_time=0.001"]),
+    ("embankment_dry", "embankment", ["--variant", "dry_geostatic", "--set", "end_time=0.003"]),
     ("freefall_coarse", "freefall", ["--variant", "coarse", "--set", "end_time=0.01"]),
     ("granular_collapse", "granular_collapse", ["--set", "end_time=0.003"]),
     ("hydrostatic", "hydrostatic", ["--set", "end_time=0.02"]),
@@ -42,7 +42,7 @@ CASES = [
     ("levee_seepage", "levee_seepage", ["--set", "end_time=0.003"]),
     ("permeameter", "permeameter", ["--set", "end_time=0.02"]),
     ("porous_dambreak", "porous_dambreak", ["--set", "end_time=0.02"]),
-    ("sheetpile", "sheetpile", ["--set", "end_time=0.003"]),
+    ("sheetpile", "sheetpile", ["--variant", "geostatic", "--set", "end_time=0.003"]),
     ("soil_column", "soil_column", ["--set", "end_time=0.003"]),
     ("stokes_plate", "stokes_plate", ["--set", "end_time=0.02"]),
     ("taylor_green", "taylor_green", ["--set", "end_time=0.02", "--set", "dt=0.001"]),  # frames every 1 ms

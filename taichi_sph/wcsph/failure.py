@@ -1,9 +1,9 @@
 """Seepage-failure sequences read from run files of mode wcsph_biot (configs/embankment.yaml,
 configs/sheetpile.yaml; docs/levee.md, docs/sheetpile.md): where and when the soil first yields, how the
-yielded zone climbs, where the wetting front in a dry levee stands, and the head difference at which
-the sand behind a sheet pile heaves. Numpy and the run-file reader only; the probes of the configs carry
-the same numbers as time series for sweeps (docs/output.md, probes soil_level, plastic_strain,
-water_depth)."""
+yielded zone climbs, where the phreatic line and the wetting front in a levee stand, and the excess
+head on the base of the soil prism behind a sheet pile. Numpy and the run-file reader only; the probes
+of the configs carry the crest height, the water on the crest, the river level and the heave as time
+series for sweeps (docs/output.md, probes soil_level, plastic_strain, water_depth, water_level)."""
 
 from __future__ import annotations
 
@@ -14,69 +14,87 @@ from ..io.hdf5 import RunFile
 WATER, SOIL = 0, 2
 
 
-def _kinds(rf: RunFile) -> np.ndarray:
-    return np.asarray(rf.kind)
-
-
 def yield_sequence(path: str, threshold: float = 1e-2) -> dict:
     """Per frame of a run: time, the number of soil particles whose plastic strain exceeds `threshold`,
-    the highest of them (its height and x), the largest displacement since the first frame; and the
-    first frame's yielded particles (where the yield starts, at their places in the first frame)."""
-    out = {"time": [], "n_yielded": [], "top_z": [], "top_x": [], "max_disp": [], "first": None}
+    the highest of them now (`top_x`, `top_z`; NaN before any), the largest soil displacement since the
+    first frame, the largest plastic strain; and `first`, the first frame with a yielded particle: its
+    time, the yielded particles' places in the first frame (`x0`), their strains, and `x0_max`, the place
+    of the most strained of them."""
+    out = {"time": [], "n_yielded": [], "top_z": [], "top_x": [], "max_disp": [], "max_strain": [],
+           "first": None}
     with RunFile(path) as rf:
-        soil = _kinds(rf) == SOIL
-        x0 = np.asarray(rf.frame(0)["position"], float)[soil]
+        soil = np.asarray(rf.kind) == SOIL
+        x0 = np.asarray(rf.field("position", 0), float)[soil]
         for i in range(rf.n_frames):
-            f = rf.frame(i)
-            x = np.asarray(f["position"], float)[soil]
-            eps = np.asarray(f["plastic_strain"], float)[soil]
+            x = np.asarray(rf.field("position", i), float)[soil]
+            eps = np.asarray(rf.field("plastic_strain", i), float)[soil]
             y = eps > threshold
-            out["time"].append(float(f["time"]))
+            out["time"].append(float(rf.times[i]))
             out["n_yielded"].append(int(y.sum()))
             out["max_disp"].append(float(np.linalg.norm(x - x0, axis=1).max()))
+            out["max_strain"].append(float(eps.max()))
             if y.any():
                 k = int(np.argmax(np.where(y, x[:, -1], -np.inf)))
                 out["top_z"].append(float(x[k, -1]))
                 out["top_x"].append(float(x[k, 0]))
                 if out["first"] is None:
-                    out["first"] = {"time": float(f["time"]), "x0": x0[y].tolist(), "strain": eps[y].tolist()}
+                    out["first"] = {"time": float(rf.times[i]), "x0": x0[y].tolist(),
+                                    "strain": eps[y].tolist(), "x0_max": x0[int(np.argmax(eps))].tolist()}
             else:
                 out["top_z"].append(float("nan"))
                 out["top_x"].append(float("nan"))
     return out
 
 
+def phreatic_line(position: np.ndarray, kind: np.ndarray, active: np.ndarray, dx: float):
+    """Phreatic line of a frame, per soil column dx wide (columns floor(x / dx)): the column centres, the
+    soil's top (its highest particle plus dx / 2) and the phreatic height, the highest water particle in
+    the column at or below the soil's top plus dx / 2 (0 where the column's pores hold no water)."""
+    pos = np.asarray(position, float)
+    kind = np.asarray(kind)
+    act = np.asarray(active, bool)
+    soil = pos[(kind == SOIL) & act]
+    water = pos[(kind == WATER) & act]
+    cs = np.floor(soil[:, 0] / dx).astype(np.int64)
+    c0 = int(cs.min())
+    n = int(cs.max()) - c0 + 1
+    top = np.full(n, -np.inf)
+    np.maximum.at(top, cs - c0, soil[:, -1])
+    cw = np.floor(water[:, 0] / dx).astype(np.int64) - c0
+    ok = (cw >= 0) & (cw < n)
+    cw, zw = cw[ok], water[ok, -1]
+    inside = zw <= top[cw] + 0.5 * dx
+    table = np.full(n, -np.inf)
+    np.maximum.at(table, cw[inside], zw[inside])
+    has = np.isfinite(top)
+    centres = (np.arange(n) + c0 + 0.5) * dx
+    heights = np.where(np.isfinite(table), table + 0.5 * dx, 0.0)
+    return centres[has], top[has] + 0.5 * dx, heights[has]
+
+
 def wetting_front(path: str, dx: float, x_from: float) -> dict:
-    """Per frame: the farthest water particle along x beyond `x_from` inside the soil and within 1.5 dx of
-    the floor (the wetting front's foot), and the phreatic height per soil column (the highest water
-    particle among the soil of the column plus dx / 2; 0 where the column is dry)."""
+    """Per frame: the wetting front's foot, the farthest water particle along x beyond `x_from` inside the
+    soil (below its column's top) and within 1.5 dx of the floor; and the phreatic line (`phreatic_line`)
+    over the columns beyond `x_from` as they stood in the first frame (`columns`, heights in `table`)."""
     out = {"time": [], "front": [], "columns": None, "table": []}
     with RunFile(path) as rf:
-        kind = _kinds(rf)
-        x_soil0 = np.asarray(rf.frame(0)["position"], float)[kind == SOIL]
-        cols = np.unique(np.round(x_soil0[x_soil0[:, 0] > x_from, 0] / dx).astype(int))
-        out["columns"] = (cols * dx).tolist()
+        kind = np.asarray(rf.kind)
+        cols = None
         for i in range(rf.n_frames):
-            f = rf.frame(i)
-            pos = np.asarray(f["position"], float)
-            act = np.asarray(f["active"], bool)
-            soil = pos[(kind == SOIL) & act]
+            pos = np.asarray(rf.field("position", i), float)
+            act = np.asarray(rf.field("active", i), bool)
+            x, top, h = phreatic_line(pos, kind, act, dx)
+            if cols is None:
+                cols = x[x > x_from]
+                out["columns"] = cols.tolist()
+            heights = np.interp(cols, x, h, left=0.0, right=0.0)
             water = pos[(kind == WATER) & act]
-            # water inside the soil: within dx / 2 of a soil particle's column and below its top
-            ci = np.round(water[:, 0] / dx).astype(int)
-            top = {}
-            for c, z in zip(np.round(soil[:, 0] / dx).astype(int), soil[:, -1]):
-                top[c] = max(top.get(c, -np.inf), z)
-            inside = np.array([z <= top.get(c, -np.inf) + 0.5 * dx for c, z in zip(ci, water[:, -1])], bool)
-            w_in = water[inside & (water[:, 0] > x_from)]
-            foot = w_in[w_in[:, -1] < 1.5 * dx]
-            out["time"].append(float(f["time"]))
+            near = water[(water[:, -1] < 1.5 * dx) & (water[:, 0] > x_from)]
+            below = near[:, -1] <= np.interp(near[:, 0], x, top, left=-1.0, right=-1.0)
+            foot = near[below]
+            out["time"].append(float(rf.times[i]))
             out["front"].append(float(foot[:, 0].max()) if len(foot) else float("nan"))
-            heights = []
-            for c in cols:
-                zc = w_in[np.round(w_in[:, 0] / dx).astype(int) == c, -1]
-                heights.append(float(zc.max() + 0.5 * dx) if zc.size else 0.0)
-            out["table"].append(heights)
+            out["table"].append(heights.tolist())
     return out
 
 

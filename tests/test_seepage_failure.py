@@ -1,0 +1,170 @@
+"""Seepage failure (seed 002 sections 3.4-3.5): the levee of configs/embankment.yaml (stage 1 at rest, the
+landside toe yielding first, a dry levee wetting), heave behind the sheet pile of configs/sheetpile.yaml,
+and the flow-net reference for that heave. Full runs: tools/seepage_failure.py, docs/levee.md and
+docs/sheetpile.md."""
+
+import numpy as np
+import pytest
+
+from taichi_sph.io.hdf5 import RunFile
+from taichi_sph.wcsph.failure import yield_sequence
+from taichi_sph.wcsph.flownet import harr_prism_ratio, prism_ratio
+
+SOIL = 2
+
+
+def test_flow_net_matches_the_conformal_map_of_a_pile_in_a_deep_bed():
+    """The finite-difference flow net (taichi_sph/wcsph/flownet.py) that gives Terzaghi's heave head for
+    configs/sheetpile.yaml, against the exact head of a thin pile in a bed of infinite depth (conformal map,
+    Harr 1962): the mean excess head on the base of the prism D deep and D / 2 wide is 0.354 dH. The
+    finite differences model a pile two cells thick, so the pile thins with the grid: D / 40 and D / 80
+    give 0.3359 and 0.3433 (bed 3 D deep, 6 D long; 6 D deep gives 0.3369 and 0.3442), first order, and
+    the extrapolation 2 x 0.3433 - 0.3359 = 0.3507 lies 0.9 % below the exact value (the bed's finite depth
+    takes 0.2 % of it). Bound 1.5 %."""
+    exact = harr_prism_ratio()
+    assert abs(exact - 0.354) < 5e-4  # the map itself: 0.35396
+    coarse = prism_ratio(0.6, 0.3, 0.1, 0.005, 0.0025)
+    fine = prism_ratio(0.6, 0.3, 0.1, 0.0025, 0.00125)
+    assert coarse < fine < exact  # converging from below as the pile thins
+    assert abs((2 * fine - coarse) / exact - 1) < 0.015, (coarse, fine, exact)
+
+
+def _soil_end_state(path):
+    """Largest soil displacement between the first and the last frame, and the largest plastic strain."""
+    with RunFile(path) as rf:
+        soil = rf.kind == SOIL
+        x0 = rf.field("position", 0)[soil]
+        x1 = rf.field("position", rf.n_frames - 1)[soil]
+        eps = rf.field("plastic_strain", rf.n_frames - 1)[soil]
+    return float(np.linalg.norm(x1 - x0, axis=1).max()), float(eps.max())
+
+
+@pytest.mark.parametrize("dx", [0.01, 0.02])
+def test_levee_stage1_stands(run_cli, tmp_path, dx):
+    """configs/embankment.yaml, stage 1 (`geostatic`: the river at 0.10 m, the pore water below a phreatic
+    line inside the levee, the K0 start, damping 400 1/s, 0.3 s). The acceptance: largest soil
+    displacement below 1 mm and no particle beyond a plastic strain of 1e-3. Measured: 0.029 mm and
+    0.81e-3 at dx 0.01, 0.042 mm and 0.97e-3 at dx 0.02 (the largest strains in the crest's core, where
+    the K0 start leaves the mound's top short of lateral support). The stage that follows without damping
+    (stage 2 with the river held, the first 0.5 s at dx 0.02) must stay at rest too: displacement below
+    1 mm (measured 0.006 mm) and the largest plastic strain grown by less than 5e-4 (measured 1.0e-4, in
+    the crest's core; a slip would take it past 1e-2): the damping does not hide a levee that would not
+    stand."""
+    s1 = tmp_path / "s1.h5"
+    r = run_cli("--config", "configs/embankment.yaml", "--variant", "geostatic", "--set", f"dx={dx}",
+                "--out", s1, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    disp, eps = _soil_end_state(s1)
+    assert disp < 1e-3 and eps < 1e-3, (dx, disp, eps)
+    if dx == 0.02:
+        s2 = tmp_path / "s2.h5"
+        r = run_cli("--config", "configs/embankment.yaml", "--set", f"dx={dx}", "--set", "end_time=0.5",
+                    "--set", "obstacles.0.motion.velocity=[0.0,0.0]",
+                    "--set", f"wcsph.soil.start_from.run={s1}", "--out", s2, "--no-progress")
+        assert r.returncode == 0, r.stderr
+        disp2, eps2 = _soil_end_state(s2)
+        assert disp2 < 1e-3 and eps2 - eps < 5e-4, (disp2, eps, eps2)
+
+
+def _sheetpile_heave(run_cli, tmp_path, head, name):
+    """configs/sheetpile.yaml, variant `coarse` (dx 0.02) from its K0 start (no stage 1) with the upstream
+    side held at `head` m and the downstream side at 0.24 m (the piston still), 2 s: the rise of the sand
+    surface over the width D beside the pile (probe heave) from 0.5 s on, and the largest rise."""
+    out = tmp_path / f"{name}.h5"
+    water = (f"water=[{{min: [0.06, 0.0], max: [0.84, {head}]}}, {{min: [0.84, 0.0], max: [1.26, 0.24]}}]")
+    r = run_cli("--config", "configs/sheetpile.yaml", "--variant", "coarse", "--set", "end_time=2.0",
+                "--set", "wcsph.soil.start_from=null", "--set", "obstacles.0.motion=null", "--set", water,
+                "--set", "wcsph.water.sound_speed=34.0",  # 10 x the free fall from the upstream side's 0.58 m
+                "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    with RunFile(out) as rf:
+        t, level = rf.probes()["heave"]
+        tu, up = rf.probes()["h_upstream"]
+        td, down = rf.probes()["h_downstream"]
+    lift = np.asarray(level) - level[0]
+    dh = float(np.mean(np.asarray(up)[tu > 0.5]) - np.mean(np.asarray(down)[td > 0.5]))
+    return dh, float(lift[np.asarray(t) > 0.5].max()), float(lift[-1])
+
+
+def test_sheetpile_heaves_within_20_percent_of_terzaghi(run_cli, tmp_path):
+    """Terzaghi's prism criterion for the coarse sheet pile (dx 0.02, pile 6 cm thick, D = 0.06 m, bed
+    0.20 m): the flow net gives a mean excess head of 0.209 dH on the base of the prism D deep and D / 2
+    wide, so the sand beside the pile heaves at dH_c = 0.99 D / 0.209 = 0.284 m. Held at 0.8 dH_c the
+    surface over the width D beside the pile must not rise by 1 mm (the acceptance's heave), held at
+    1.2 dH_c it must (the acceptance's 20 %). Measured (head differences as the probes read them over
+    0.5-2 s): dH 0.226 m, largest rise 0.01 mm; dH 0.339 m, 3.8 / 5.2 / 6.5 mm at 1 / 1.5 / 2 s (still
+    rising). docs/sheetpile.md has the full rise at dx 0.01 and 0.02."""
+    dh_c = 0.99 * 0.06 / prism_ratio(0.54, 0.2, 0.06, 0.06, 0.0025, at=0.12)
+    assert abs(dh_c - 0.284) < 0.002
+    below = _sheetpile_heave(run_cli, tmp_path, round(0.24 + 0.8 * dh_c, 3), "below")
+    above = _sheetpile_heave(run_cli, tmp_path, round(0.24 + 1.2 * dh_c, 3), "above")
+    assert below[1] < 1e-3, below
+    assert above[2] > 1e-3, above
+
+
+def test_levee_first_yield_at_the_landside_toe(run_cli, tmp_path):
+    """configs/embankment.yaml at dx 0.02, shortened: stage 1 as shipped, stage 2 with k five times the
+    shipped 3 cm/s and the piston five times as fast (Darcy's law makes the seepage's time scale 1 / k, and
+    the drag of the river's flow on the riverside slope, (g / k) times its speed, keeps its size), 5.5 s
+    in place of ~27 s. The acceptance: the first particle past a plastic strain of 1e-2 lies within 3 dx
+    of the landside toe (2.26, 0). The first frame (every 0.25 s) with a particle past 1e-2 holds a few
+    particles at once on the lower landside slope; the most strained of them is the first. Measured: at
+    4.75 s, three particles, (2.13, 0.05), (2.21, 0.01) and (2.23, 0.01), the most strained (2.23, 0.01),
+    1.6 dx from the toe; with the time step halved (timestep.cfl 0.125) the same frame, particles and
+    strains' order (the full run at the shipped k: 16.5 s, the same particle; dx 0.01: 11.0 s, (2.245,
+    0.005), 1.6 dx; docs/levee.md); nothing on the riverside slope or the crest. Bound 3 dx: the
+    acceptance."""
+    s1, s2 = tmp_path / "s1.h5", tmp_path / "s2.h5"
+    r = run_cli("--config", "configs/embankment.yaml", "--variant", "geostatic", "--set", "dx=0.02",
+                "--out", s1, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    r = run_cli("--config", "configs/embankment.yaml", "--set", "dx=0.02", "--set", "end_time=5.5",
+                "--set", "output.every=0.25", "--set", "wcsph.soil.permeability=0.15",
+                "--set", "obstacles.0.motion.velocity=[0.06,0.0]", "--set", "obstacles.0.motion.ramp=0.4",
+                "--set", f"wcsph.soil.start_from.run={s1}", "--out", s2, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    seq = yield_sequence(str(s2), 1e-2)
+    first = seq["first"]
+    assert first is not None, "no particle yielded"
+    toe = np.array([2.26, 0.0])
+    assert np.linalg.norm(np.asarray(first["x0_max"]) - toe) < 3 * 0.02, first
+    assert all(x > 1.885 for x, _ in first["x0"]), first  # all on the landside slope
+
+
+def test_dry_levee_wetting_front_follows_boussinesq(run_cli, tmp_path):
+    """configs/embankment.yaml `dry` at dx 0.02, shortened as the first-yield test (k five times the
+    shipped, 0.15 m/s: the Boussinesq front's time scale is 1 / k), 4 s: the river (0.12 m, falling to
+    0.103 m as the levee takes in water) against the dry levee. The wetting front's foot (the farthest pore
+    water on the floor) must advance as the Boussinesq solution x_f = 1.62 sqrt(k integral(H dt) / S) for
+    the river level H(t) the probe reads; the advance is taken from 0.4 s, so the entry's place on the
+    sloping face drops out. S is the drainable porosity: the model's water particles fill the pores at full
+    volume, so S = 1 (a real sand drains n = 0.4: against that reference the model's front is 37 % short,
+    docs/levee.md). Measured: advance 0.182 m at 2.2 s (reference 0.175, +4 %), 0.275 m at 4 s (0.278,
+    -1 %); before ~2 s the wedge under the sloping face is still filling (+35 % at 1 s). Bound 20 % (the
+    acceptance) over 2-4 s; the full runs at the shipped k read +1 % (dx 0.02) and +9 % (dx 0.01) at 30 s
+    (docs/levee.md). The advance is slower than linear: x_f = a + b t^p gives p = 0.37 (0.34-0.35 in the
+    full runs; Boussinesq 0.5); checked as a speed over 2.2-4 s below that over 0.4-2.2 s."""
+    s1, s2 = tmp_path / "d1.h5", tmp_path / "d2.h5"
+    r = run_cli("--config", "configs/embankment.yaml", "--variant", "dry_geostatic", "--set", "dx=0.02",
+                "--out", s1, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    r = run_cli("--config", "configs/embankment.yaml", "--variant", "dry", "--set", "dx=0.02",
+                "--set", "end_time=4.0", "--set", "output.every=0.1", "--set", "wcsph.soil.permeability=0.15",
+                "--set", f"wcsph.soil.start_from.run={s1}", "--out", s2, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    from taichi_sph.wcsph.dupuit import boussinesq_front
+    from taichi_sph.wcsph.failure import wetting_front
+
+    wf = wetting_front(str(s2), 0.02, 1.26)
+    t, front = np.asarray(wf["time"]), np.asarray(wf["front"])
+    with RunFile(s2) as rf:
+        tr, hr = (np.asarray(v, float) for v in rf.probes()["river"])
+    integral = np.interp(t, tr, np.concatenate([[0.0], np.cumsum(0.5 * (hr[1:] + hr[:-1]) * np.diff(tr))]))
+    ref = boussinesq_front(0.15, 1.0, 1.0, integral)  # 1.62 sqrt(k integral(H dt) / S), S = 1
+    k0 = int(np.argmin(np.abs(t - 0.4)))
+    late = t >= 2.0 - 1e-9
+    err = (front[late] - front[k0]) / (ref[late] - ref[k0]) - 1
+    assert np.all(np.abs(err) < 0.2), err
+    # slower than linear: the speed over the second half of the window is below that of the first half
+    mid = int(np.argmin(np.abs(t - 2.2)))
+    assert (front[-1] - front[mid]) / (t[-1] - t[mid]) < (front[mid] - front[k0]) / (t[mid] - t[k0])
