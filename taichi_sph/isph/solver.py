@@ -43,6 +43,8 @@ GRAD_CORRECTED, GRAD_DIFFERENCE, GRAD_SYMMETRIC = 0, 1, 2
 #: sweeps of the lowest index through the water pairs per step (_closed_bodies): a body up to this many
 #: pair hops across is found whole (a pair hop is up to r_e = 2.4 dx)
 BODY_SWEEPS = 6
+#: most re-solves of the PPE per step after freeing water held in tension (_k_tension)
+TENSION_PASSES = 3
 _GRAD = {"corrected": GRAD_CORRECTED, "difference": GRAD_DIFFERENCE, "symmetric": GRAD_SYMMETRIC}
 
 
@@ -95,6 +97,13 @@ class ISPHSolver(SolverCommon):
         self.ground_cone = sw.ground_cone
         self.cone_cos = math.cos(math.radians(cfg.isph.ground_surface_cone))
         self.ground_beta = float(cfg.isph.ground_surface_density)
+        # free water next to the ground held in tension becomes free surface (_k_tension)
+        self.ground_tension = sw.ground_tension
+        # kernel-gradient correction in the ground (L_i = M_i^-1 where eps_i < 1), else plain eq 12 there
+        self.ground_correction = sw.ground_correction
+        #: candidate of the cone test (in or next to the ground): eq 34's count or the plain count marks it,
+        #: whatever its cone said (_k_tension reads it)
+        self.candidate = ti.field(ti.i32, scene.n)
         self.shifting = sw.shifting
         self.shift_a = cfg.isph.shifting
         self.shift_max = cfg.isph.shifting_max * dx
@@ -370,6 +379,12 @@ class ISPHSolver(SolverCommon):
                     det = M.determinant()
                     if det > 0.1:
                         Li = M.inverse()
+                    if ti.static(self.porous and not self.ground_correction):
+                        # on the sparse, disordered pore water M_i's smallest eigenvalue falls to 0.2-0.3 and
+                        # L_i amplifies the gradient beyond what the PPE's Laplacian (eq 24) assumes: the
+                        # projection overshoots and the plug's pressure alternated from step to step
+                        if self.eps[i] < 1.0:
+                            Li = ti.Matrix.identity(float, self.dim)
                 self.L[i] = Li
 
     def _closed_bodies(self):
@@ -487,10 +502,13 @@ class ISPHSolver(SolverCommon):
                     r = rij.norm()
                     if r > 0.0:
                         gsum += vj * kernels.grad_w(rij, r, self.h, self.dim)
+                self.candidate[i] = 0
                 if near:
                     candidate = self.free[i] == 1
                     if self.eps[i] >= 1.0 and plain < self.n_surf:
                         candidate = True
+                    if candidate:
+                        self.candidate[i] = 1
                     is_free = 0
                     gn = gsum.norm()
                     if candidate and gn > 0.0:
@@ -728,6 +746,42 @@ class ISPHSolver(SolverCommon):
         if self.solve_mask[i] == 1:
             val = self.p_surface
         return val
+
+    @ti.kernel
+    def _k_tension(self, psol: ti.template()) -> ti.i32:
+        """Free water next to the ground that the PPE holds in tension becomes free surface: a candidate of
+        the cone test (short of neighbours, but a neighbour in its cone) in free water (eps_i = 1) whose
+        solved pressure is below the atmosphere's (P < 0). Without capillarity water cannot be pulled: air
+        enters where the projection would hold a thinning sheet together. Returns how many were freed
+        (the PPE is then solved again). Not applied inside the ground (eps_i < 1): near a plug's exit
+        face the pore pressure is near zero, and freeing its noise put Dirichlet rows into the plug."""
+        n_new = 0
+        for i in range(self.n):
+            if self.solve_mask[i] == 1 and self.free[i] == 0 and self.candidate[i] == 1 and self.eps[i] >= 1.0:
+                if psol[self.row[i]] < 0.0:
+                    self.free[i] = 1
+                    n_new += 1
+        return n_new
+
+    def _solve_tension(self, iters, res, ok, sol):
+        """Up to TENSION_PASSES times: free the water held in tension (_k_tension) and solve again from the
+        last pressure. Returns the summed iterations, the last residual and convergence, and the sparse
+        path's solution."""
+        for _ in range(TENSION_PASSES):
+            if not ok or self._k_tension(self.psol) == 0:
+                break
+            if self.ppe_ell:
+                self._k_assemble_ell(self.ppe)
+                more, res, ok = self.ppe.solve(self.n_water, zero_mean=self.dirichlet_rows[None] == 0)
+            else:
+                self._k_assemble(self.ppe.builder)
+                self.ppe.check_triplets(int(self.triplets[None]))
+                self.ppe.build()
+                b = self.b.to_numpy()[: self.n_water]
+                sol, more, res, ok = self.ppe.solve(b, sol, zero_mean=self.dirichlet_rows[None] == 0)
+                self.psol.from_numpy(sol.astype(self.np_fp))
+            iters += more
+        return iters, res, ok, sol
 
     @ti.kernel
     def _k_scatter_pressure(self, psol: ti.template()):
@@ -1016,6 +1070,7 @@ class ISPHSolver(SolverCommon):
         self.dt[None] = dt
         self._k_predictor()
         t0 = self._tick("predictor", t0)
+        sol = None
         if self.ppe_ell:
             self._k_gather_pressure(self.psol)  # warm start: the solver's x is the last pressure in this step's rows
             self._k_assemble_ell(self.ppe)
@@ -1035,6 +1090,10 @@ class ISPHSolver(SolverCommon):
             x0 = self.psol.to_numpy()[: self.n_water]
             t0 = self._tick("ppe_assembly", t0)
             sol, iters, res, ok = self.ppe.solve(b, x0, zero_mean=self.dirichlet_rows[None] == 0)
+        if self.ground_tension:
+            if not self.ppe_ell:
+                self.psol.from_numpy(sol.astype(self.np_fp))
+            iters, res, ok, sol = self._solve_tension(iters, res, ok, sol)
         t0 = self._tick("ppe_solve", t0)
         if not ok:
             guard.solver_failure(self.step_count + 1, self.time + dt, iters, res, self.ppe.tolerance,
