@@ -52,7 +52,7 @@ class Switches:
     ground_tension: bool | None = _switch((ISPH,), "with the cone: free water next to the ground that the pressure "
                                                    "equation holds in tension becomes free surface "
                                                    "(isph.ground_surface_tension)")
-    ground_correction: bool | None = _switch((ISPH,), "the kernel-gradient correction also inside saturated porous ground "
+    ground_correction: bool | None = _switch((ISPH,), "the kernel-gradient correction also inside saturated porous ground of weak drag "
                                                       "(gradient corrected and isph.ground_gradient_correction)")
     shifting: bool | None = _switch((ISPH,), "particle shifting (isph.shifting > 0)")
     collisions: bool | None = _switch((ISPH,), "collision handling (isph.collision_distance > 0)")

@@ -116,12 +116,13 @@ class ISPH(Strict):
     #: pressure gradient: eq 12 difference form with kernel-gradient correction (default),
     #: plain eq 12, or the symmetric eq 13 form
     gradient: Literal["corrected", "difference", "symmetric"] = "corrected"
-    #: with gradient: corrected, whether water inside saturated porous ground (eps < 1, no free-surface
-    #: particle within its support) takes the correction too (default: no, the plain eq 12 there; next
-    #: to a surface or a wetting front it keeps it). On the sparse, disordered pore water the correction
-    #: matrix amplifies the gradient up to 3x, more than the pressure equation's Laplacian assumes: the
-    #: permeameter's plug pressure alternated from step to step (700 / 2000 Pa) and the column bounced
-    #: off it at dt 0.25 ms (docs/isph.md, "Surface test in the ground")
+    #: with gradient: corrected, whether water inside saturated porous ground of weak drag (eps < 1, no
+    #: free-surface particle within its support, implicit drag D = 1 + c (a + b |v|) below 5) takes the
+    #: correction too (default: no, the plain eq 12 there). On the sparse, disordered pore water the
+    #: correction matrix amplifies the gradient up to 3-5x, more than the pressure equation's Laplacian
+    #: assumes, and without drag to damp it the overshoot grew from step to step: the permeameter's plug
+    #: pressure alternated (700 / 2000 Pa) and the column bounced off it at dt 0.25 ms (docs/isph.md,
+    #: "Surface test in the ground")
     ground_gradient_correction: bool = False
     #: near-contact collision model (MPS family): water particles closer than this fraction of dx
     #: lose their approaching relative velocity (walls: the velocity into the wall); 0 disables.
