@@ -49,6 +49,11 @@ class Switches:
                                                    "(isph.advection: pore); else the Darcy velocity")
     ground_cone: bool | None = _switch((ISPH,), "free surface in and next to the ground confirmed by an empty "
                                                 "cone (porous ground and isph.ground_surface_cone > 0)")
+    ground_tension: bool | None = _switch((ISPH,), "with the cone: free water next to the ground that the pressure "
+                                                   "equation holds in tension becomes free surface "
+                                                   "(isph.ground_surface_tension)")
+    ground_correction: bool | None = _switch((ISPH,), "the kernel-gradient correction also inside saturated porous ground of weak drag "
+                                                      "(gradient corrected and isph.ground_gradient_correction)")
     shifting: bool | None = _switch((ISPH,), "particle shifting (isph.shifting > 0)")
     collisions: bool | None = _switch((ISPH,), "collision handling (isph.collision_distance > 0)")
     free_surface: bool | None = _switch((ISPH,), "free-surface detection, eq 34 (n_surf > 0)")
@@ -86,6 +91,10 @@ class Switches:
             return cls(mode=ISPH, **common, viscosity=cfg.fluid.viscosity > 0.0, dry_walls=g_abs > 0.0,
                        porous=bool(scene.markers),
                        ground_cone=bool(scene.markers) and i.ground_surface_cone > 0.0,
+                       ground_tension=bool(scene.markers) and i.ground_surface_cone > 0.0
+                       and i.ground_surface_tension,
+                       ground_correction=bool(scene.markers) and i.gradient == "corrected"
+                       and i.ground_gradient_correction,
                        turbulence=cfg.fluid.turbulence == "smagorinsky",
                        gradient=i.gradient,
                        pore_advection=i.advection == "pore",

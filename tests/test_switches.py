@@ -29,6 +29,8 @@ ISPH_FLAGS = {
     "pore_advection": lambda s: s.pore_advection,
     "shifting": lambda s: s.shifting,
     "ground_cone": lambda s: s.ground_cone,
+    "ground_tension": lambda s: s.ground_tension,
+    "ground_correction": lambda s: s.ground_correction,
     "collisions": lambda s: s.collision,
     "free_surface": lambda s: s.n_surf > 0,
     "ppe_ell": lambda s: s.ppe_ell,

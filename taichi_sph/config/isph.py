@@ -95,10 +95,16 @@ class ISPH(Strict):
     #: in and next to porous ground: a particle that eq 34's count (or, in free water, the plain
     #: particle count) finds short of neighbours is free surface only if no neighbour lies in a cone
     #: of this half-angle (degrees) about its outward normal, -sum_j V_j grad W_ij (the scan-region
-    #: test of Marrone et al. 2010); 0 = eq 34's count alone (default). At 60 deg the permeameter's
-    #: plug keeps no Dirichlet rows and its level holds at dt 1 and 0.5 ms, but the coarse free fall
-    #: stops on the speed guard at 2.3 s (docs/isph.md, "Surface test in the ground")
-    ground_surface_cone: Annotated[float, Field(ge=0, lt=90)] = 0.0
+    #: test of Marrone et al. 2010); 0 = eq 34's count alone (the seed's test). Eq 34 misreads the
+    #: disordered pore water: it flagged 26-44 % of the permeameter's saturated plug and 15-25 % of
+    #: the free fall's layer free surface, with 60 deg 0-1 % (docs/isph.md, "Surface test in the ground")
+    ground_surface_cone: Annotated[float, Field(ge=0, lt=90)] = 60.0
+    #: with the cone test: free water next to the ground (a candidate of that test, eps = 1) that the
+    #: pressure equation solves below the atmosphere (P < 0) is free surface, and the equation is
+    #: solved again (at most 3 times a step): air enters where water would be pulled apart. Without
+    #: it, splashes over the free fall's layer, their cones blocked by the ground's water, held tensions
+    #: of 10-150 kPa and threw water out of the tank (docs/isph.md, "Surface test in the ground")
+    ground_surface_tension: bool = True
     #: with the cone test (ground_surface_cone > 0), in and next to porous ground: a particle whose
     #: number density <rho> is below this fraction of its rest value (eps rho_w) is free surface
     #: whatever its cone. Ground that drains holds its water in scattered pores with air between
@@ -110,6 +116,14 @@ class ISPH(Strict):
     #: pressure gradient: eq 12 difference form with kernel-gradient correction (default),
     #: plain eq 12, or the symmetric eq 13 form
     gradient: Literal["corrected", "difference", "symmetric"] = "corrected"
+    #: with gradient: corrected, whether water inside saturated porous ground of weak drag (eps < 1, no
+    #: free-surface particle within its support, implicit drag D = 1 + c (a + b |v|) below 5) takes the
+    #: correction too (default: no, the plain eq 12 there). On the sparse, disordered pore water the
+    #: correction matrix amplifies the gradient up to 3-5x, more than the pressure equation's Laplacian
+    #: assumes, and without drag to damp it the overshoot grew from step to step: the permeameter's plug
+    #: pressure alternated (700 / 2000 Pa) and the column bounced off it at dt 0.25 ms (docs/isph.md,
+    #: "Surface test in the ground")
+    ground_gradient_correction: bool = False
     #: near-contact collision model (MPS family): water particles closer than this fraction of dx
     #: lose their approaching relative velocity (walls: the velocity into the wall); 0 disables.
     #: Acts only on pairs far closer than the lattice spacing; its events are counted per step.
