@@ -546,15 +546,7 @@ class ISPHSolver(SolverCommon):
                             n_out = -gsum / gn
                             for k in range(self.grid.nbr_count[i]):
                                 j, rij, r = self._pair(i, k, xi)
-                                # a wall blocks the cone only where it faces the particle's outward side
-                                # (n_i . n_wall < 0: water against a floor or a wall it leans on). A side
-                                # wall counts as wet below water hanging in the ground, and beside a slab's
-                                # lower corner it blocked the downward cone: the slab's surface was not
-                                # found (Darcy column at dx 2 cm 3.6 % slow)
-                                faces = True
-                                if self.kind[j] == WALL:
-                                    faces = n_out.dot(self.normal[j]) < 0.0
-                                if self._present(j) and faces:
+                                if self._present(j):
                                     if -rij.dot(n_out) >= self.cone_cos * r:
                                         is_free = 0
                     # draining ground: scattered pore water with air between, a deficit of number
