@@ -4,8 +4,9 @@ Cases (`--case`, default all):
 - dambreak_20k, dambreak_80k: configs/dambreak_wcsph.yaml (tank 4 m x 3 m, column 1 m x 2 m) at dx 1 cm
   and 5 mm;
 - levee_saturated: the levee config given by `--levee` (default configs/embankment.yaml), variant
-  `--saturated` (soil + water, the river rising by the inflow);
-- levee_dry: the same config, variant `--dry` (soil + water + air in the levee's pores);
+  `--saturated` (default none: the shipped config's stage 2, soil + water, a piston raising the river);
+- levee_dry: the same config, variant `--dry` (the shipped one: soil + a river against the dry levee, no
+  air; the earlier configs' `dry` variant held air in the levee's pores);
 - dambreak3d_200k (on request): the dam break's 3d variant (a slice 0.2 m deep) at 200k water particles.
 The levee cases start from their K0 state (`wcsph.soil.start_from` cleared: the saturated stage otherwise
 needs a stage-1 run file; the particles and passes are the same). Each case lets the flow start (warm-up,
@@ -18,7 +19,7 @@ lists were rebuilt. Writes the section "bench" of docs/performance_wcsph.md (or 
 docs/performance_wcsph_bench.json.
 
     python tools/bench_wcsph.py [--case ...] [--steps 300] [--warmup 200] [--precision f64 f32]
-                                [--levee configs/embankment.yaml --saturated saturated --dry dry]
+                                [--levee configs/embankment.yaml --saturated VARIANT --dry dry]
     python tools/bench_wcsph.py --against /path/to/other/checkout --rounds 3 [...]
 
 Each precision runs in its own process (one Taichi runtime per process). With --against, the same cases
@@ -69,15 +70,15 @@ def case_table(args) -> dict:
         ),
         "levee_saturated": (
             levee,
-            args.saturated,
+            args.saturated or None,
             ["wcsph.soil.start_from=null"],
-            f"levee, soil + water ({Path(levee).name} variant {args.saturated})",
+            f"levee, soil + water ({Path(levee).name} {('variant ' + args.saturated) if args.saturated else 'stage 2'})",
         ),
         "levee_dry": (
             levee,
             args.dry,
             ["wcsph.soil.start_from=null"],
-            f"levee, soil + water + air ({Path(levee).name} variant {args.dry})",
+            f"dry levee ({Path(levee).name} variant {args.dry})",
         ),
     }
 
@@ -388,8 +389,9 @@ def main():
     ap.add_argument(
         "--levee", default=str(ROOT / "configs" / "embankment.yaml"), help="config of the levee cases"
     )
-    ap.add_argument("--saturated", default="saturated", help="its variant with soil and water")
-    ap.add_argument("--dry", default="dry", help="its variant with soil, water and air")
+    ap.add_argument("--saturated", default="",
+                    help="its variant with soil and water (default none: the shipped config's stage 2)")
+    ap.add_argument("--dry", default="dry", help="its dry-levee variant")
     ap.add_argument("--steps", type=int, default=300)
     ap.add_argument("--warmup", type=int, default=200)
     ap.add_argument("--arch", default="cpu")

@@ -246,7 +246,8 @@ class SoilPasses:
         first_bad = 2.0e9
         h = fl.h0
         ti.loop_config(serialize=fl.serial)
-        for i in range(fl.n):
+        for m in range(fl.n_moving[None]):  # the moving particles (fluid and soil), solver.moving_ids
+            i = fl.moving_ids[m]
             if fl.fmask[i] == 2:
                 if ti.static(fl.coupled):
                     self._pore_at(i)
@@ -377,7 +378,8 @@ class SoilPasses:
         fl = self.fl
         h = fl.h0
         ti.loop_config(serialize=fl.serial)
-        for i in range(fl.n):
+        for m in range(fl.n_moving[None]):  # the moving particles (fluid and soil), solver.moving_ids
+            i = fl.moving_ids[m]
             if fl.fmask[i] == 1 and fl.kind[i] == WATER:
                 xi = fl.xf(i)
                 ai = fl.a[i]
@@ -442,7 +444,8 @@ class SoilPasses:
         interior this is C_s phi_w (u_bar - v_s) with C_s = n rho_w / rho_soil g / k."""
         fl = self.fl
         ti.loop_config(serialize=fl.serial)
-        for i in range(fl.n):
+        for m in range(fl.n_moving[None]):  # the moving particles (fluid and soil), solver.moving_ids
+            i = fl.moving_ids[m]
             if fl.fmask[i] == 2:
                 fsum = ti.Vector.zero(float, fl.dim)
                 for k in range(fl.grid.nbr_count[i]):
@@ -465,7 +468,8 @@ class SoilPasses:
         tot = ti.Vector.zero(float, fl.dim)
         big = 0.0
         ti.loop_config(serialize=fl.serial)
-        for i in range(fl.n):
+        for m in range(fl.n_moving[None]):  # the moving particles (fluid and soil), solver.moving_ids
+            i = fl.moving_ids[m]
             if fl.fmask[i] == 2:
                 f = self.fdrag[i]
                 tot += f
