@@ -844,6 +844,7 @@ class WCSPHSolver(SolverCommon):
                 self.state_scalars, self.grid)
         restore(self.soil, {k: v for k, v in state.items() if k in soil_keys}, self.soil.state_fields,
                 self.soil.state_scalars)
+        self._k_moving_list()  # a function of fmask, which the state holds
 
 
 def prediction_weights(dt: float, dt_prev: float, dt_prev2: float, known: int) -> tuple[float, float]:
