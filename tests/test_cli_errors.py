@@ -101,7 +101,9 @@ CASES = [
          ["'inflow[0].level_probe'", "required"]),
     case("inflow-level-probe-unknown",
          ["--config", "configs/embankment.yaml", "--variant", "geostatic", "--set",
-          "inflow=[{min: [0.1, 0.2], max: [0.3, 0.28], rate: 0.01, level: [[0, 0.1]], level_probe: gauge}]"],
+          "inflow=[{min: [0.1, 0.2], max: [0.3, 0.28], rate: 0.01, level: [[0, 0.1]], level_probe: gauge}]",
+          # the inflow's speed asks for more than the config's pinned sound speed, a rule checked first
+          "--set", "wcsph.water.sound_speed=30"],
          ["'inflow[0].level_probe'", "no water_level probe", "gauge"]),
     case("inflow-level-times",
          ["--config", "configs/embankment.yaml", "--variant", "geostatic", "--set",
