@@ -64,8 +64,9 @@ def test_a_case_run_again_replaces_only_its_own_results(tmp_path):
 
 def test_darcy_column_converges(tmp_path):
     """The two coarsest Darcy columns of the small setting through the suite's own runner. Measured:
-    error 0.28 % at dx 2 cm and 0.095 % at 1 cm (order 1.6). Bounds: 0.6 % and 0.2 % (twice the measured,
-    the SPEC target being 1 %) and a positive order."""
+    error 0.20 % at dx 2 cm and 0.086 % at 1 cm (order 1.2; 3.6 % and 1.1 % while the side walls below the
+    hanging column counted as wet, docs/isph.md). Bounds: 0.4 % and 0.2 % (about twice the measured, the
+    SPEC target being 1 %) and a positive order."""
     c = validate.CASES["darcy_column"]
     runs, evaluate = c.build("small")
     rows = []
@@ -75,7 +76,7 @@ def test_darcy_column_converges(tmp_path):
         row.update(evaluate(tmp_path / row.pop("out").split("/")[-1], run))
         rows.append(row)
     assert rows[0]["dx"] > rows[1]["dx"]
-    assert rows[0]["error"] < 0.006 and rows[1]["error"] < 0.002, rows
+    assert rows[0]["error"] < 0.004 and rows[1]["error"] < 0.002, rows
     _, fit = validate.observed_orders([r["dx"] for r in rows], [r["error"] for r in rows])
     assert fit > 0
 
