@@ -275,9 +275,10 @@ class ISPHSolver(SolverCommon):
         """Dry walls. A wall particle of a vertical wall (|n . up| < 1/2) that no water particle within its
         support reaches in height (z_water >= z_wall - 0.6 dx) stands in air above the waterline: it is
         left out of every sum (number density, free-surface count, PPE, gradient, viscosity), as air is;
-        so is one that all water within its support hangs above (more than 0.6 dx higher): a wall below
-        water held in porous ground, which counted as wet blocked the free-surface cones of a draining
-        slab's lower corners (Darcy column at dx 2 cm 3.6 % slow).
+        so is one that all water within its support hangs above (more than 0.6 dx higher, with no floor
+        below it within its support: water resting on a floor reaches the wall layers beside the floor):
+        a wall below water held in porous ground, which counted as wet blocked the free-surface cones of a
+        draining slab's lower corners (Darcy column at dx 2 cm 3.6 % slow).
         Counting it would fill the missing air above surface particles along a wall, most of all in a
         corner where two walls rise above the water, so that those particles are not found free.
         Floors, ceilings and obstacle tops (|n . up| >= 1/2) are always wet."""
@@ -292,13 +293,20 @@ class ISPHSolver(SolverCommon):
             for i in range(self.n):
                 if self.solve_mask[i] == 1:
                     xi = self.x[i]
+                    # water with a floor (an upward-facing wall) below it within its support rests on it
+                    rests = False
+                    for k in range(self.grid.nbr_count[i]):
+                        j = self.grid.nbr[i, k]
+                        if self.kind[j] == WALL and self.normal[j].dot(self.up) >= 0.5:
+                            if operators.rel(xi, self.x[j], self.period).dot(self.up) > 0.0:
+                                rests = True
                     for k in range(self.grid.nbr_count[i]):
                         j = self.grid.nbr[i, k]
                         if self.kind[j] == WALL and self.wet[j] != 1:
                             dz = operators.rel(xi, self.x[j], self.period).dot(self.up)
                             if dz >= -0.6 * self.dx:
                                 ti.atomic_or(self.wet[j], WET_REACHED)
-                            if dz <= 0.6 * self.dx:
+                            if rests or dz <= 0.6 * self.dx:
                                 ti.atomic_or(self.wet[j], WET_NOT_HANGING)
             for i in range(self.n):
                 if self.kind[i] == WALL and self.wet[i] != 1:
