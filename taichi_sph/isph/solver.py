@@ -804,18 +804,32 @@ class ISPHSolver(SolverCommon):
         for _ in range(TENSION_PASSES):
             if not ok or self._k_tension(self.psol) == 0:
                 break
-            if self.ppe_ell:
-                self._k_assemble_ell(self.ppe)
-                more, res, ok = self.ppe.solve(self.n_water, zero_mean=self.dirichlet_rows[None] == 0)
-            else:
-                self._k_assemble(self.ppe.builder)
-                self.ppe.check_triplets(int(self.triplets[None]))
-                self.ppe.build()
-                b = self.b.to_numpy()[: self.n_water]
-                sol, more, res, ok = self.ppe.solve(b, sol, zero_mean=self.dirichlet_rows[None] == 0)
+            sol, more, res, ok = self._solve_ppe(self._assemble_ppe(), sol)
+            if not self.ppe_ell:
                 self.psol.from_numpy(sol.astype(self.np_fp))
             iters += more
         return iters, res, ok, sol
+
+    def _assemble_ppe(self):
+        """Assemble this step's PPE (eq 24) into the ELL matrix or the sparse builder; for the sparse path,
+        return its right-hand side."""
+        if self.ppe_ell:
+            self._k_assemble_ell(self.ppe)
+            return None
+        self._k_assemble(self.ppe.builder)
+        self.ppe.check_triplets(int(self.triplets[None]))
+        self.ppe.build()
+        return self.b.to_numpy()[: self.n_water]
+
+    def _solve_ppe(self, b, x0):
+        """Solve the assembled PPE: the ELL path from the pressure in psol, the sparse one from x0 with the
+        right-hand side b. Returns (solution or None on the ELL path, iterations, residual, converged);
+        zero mean where the water holds no Dirichlet row."""
+        zero_mean = self.dirichlet_rows[None] == 0
+        if self.ppe_ell:
+            iters, res, ok = self.ppe.solve(self.n_water, zero_mean=zero_mean)
+            return None, iters, res, ok
+        return self.ppe.solve(b, x0, zero_mean=zero_mean)
 
     @ti.kernel
     def _k_scatter_pressure(self, psol: ti.template()):
@@ -1097,26 +1111,22 @@ class ISPHSolver(SolverCommon):
         self.dt[None] = dt
         self._k_predictor()
         t0 = self._tick("predictor", t0)
-        sol = None
         if self.ppe_ell:
             self._k_gather_pressure(self.psol)  # warm start: the solver's x is the last pressure in this step's rows
-            self._k_assemble_ell(self.ppe)
+            self._assemble_ppe()
             t0 = self._tick("ppe_assembly", t0)
             try:
-                iters, res, ok = self.ppe.solve(self.n_water, zero_mean=self.dirichlet_rows[None] == 0)
+                sol, iters, res, ok = self._solve_ppe(None, None)
             except EllOverflowError as exc:
                 self._widen_ppe(exc, dt)
-                self._k_assemble_ell(self.ppe)
-                iters, res, ok = self.ppe.solve(self.n_water, zero_mean=self.dirichlet_rows[None] == 0)
+                self._assemble_ppe()
+                sol, iters, res, ok = self._solve_ppe(None, None)
         else:
-            self._k_assemble(self.ppe.builder)
-            self.ppe.check_triplets(int(self.triplets[None]))
-            self.ppe.build()
+            b = self._assemble_ppe()
             self._k_gather_pressure(self.psol)
-            b = self.b.to_numpy()[: self.n_water]
             x0 = self.psol.to_numpy()[: self.n_water]
             t0 = self._tick("ppe_assembly", t0)
-            sol, iters, res, ok = self.ppe.solve(b, x0, zero_mean=self.dirichlet_rows[None] == 0)
+            sol, iters, res, ok = self._solve_ppe(b, x0)
         if self.ground_tension:
             if not self.ppe_ell:
                 self.psol.from_numpy(sol.astype(self.np_fp))
