@@ -805,8 +805,6 @@ class ISPHSolver(SolverCommon):
             if not ok or self._k_tension(self.psol) == 0:
                 break
             sol, more, res, ok = self._solve_ppe(self._assemble_ppe(), sol)
-            if not self.ppe_ell:
-                self.psol.from_numpy(sol.astype(self.np_fp))
             iters += more
         return iters, res, ok, sol
 
@@ -822,14 +820,17 @@ class ISPHSolver(SolverCommon):
         return self.b.to_numpy()[: self.n_water]
 
     def _solve_ppe(self, b, x0):
-        """Solve the assembled PPE: the ELL path from the pressure in psol, the sparse one from x0 with the
-        right-hand side b. Returns (solution or None on the ELL path, iterations, residual, converged);
-        zero mean where the water holds no Dirichlet row."""
+        """Solve the assembled PPE into psol: the ELL path in place from the pressure in psol, the sparse one
+        from x0 with the right-hand side b (its solution copied into psol). Returns (the sparse path's
+        solution or None, iterations, residual, converged); zero mean where the water holds no Dirichlet
+        row."""
         zero_mean = self.dirichlet_rows[None] == 0
         if self.ppe_ell:
             iters, res, ok = self.ppe.solve(self.n_water, zero_mean=zero_mean)
             return None, iters, res, ok
-        return self.ppe.solve(b, x0, zero_mean=zero_mean)
+        sol, iters, res, ok = self.ppe.solve(b, x0, zero_mean=zero_mean)
+        self.psol.from_numpy(sol.astype(self.np_fp))
+        return sol, iters, res, ok
 
     @ti.kernel
     def _k_scatter_pressure(self, psol: ti.template()):
@@ -1128,15 +1129,11 @@ class ISPHSolver(SolverCommon):
             t0 = self._tick("ppe_assembly", t0)
             sol, iters, res, ok = self._solve_ppe(b, x0)
         if self.ground_tension:
-            if not self.ppe_ell:
-                self.psol.from_numpy(sol.astype(self.np_fp))
             iters, res, ok, sol = self._solve_tension(iters, res, ok, sol)
         t0 = self._tick("ppe_solve", t0)
         if not ok:
             guard.solver_failure(self.step_count + 1, self.time + dt, iters, res, self.ppe.tolerance,
                                  self.cfg.isph.ppe.on_failure)
-        if not self.ppe_ell:
-            self.psol.from_numpy(sol.astype(self.np_fp))
         self._k_scatter_pressure(self.psol)
         self._k_water_gradient()
         self.wall_pressure.update()
