@@ -14,8 +14,20 @@ def _cache_dir() -> str:
     return str(Path(base) / "ticache")
 
 
-def init(arch: str = "cpu", precision: str = "auto", threads: int | None = None, debug: bool = False) -> dict:
-    """Initialise Taichi once for this process. Returns {'arch': name, 'precision': 'f32'|'f64'}."""
+def auto_precision(arch, mode: str | None) -> str:
+    """What `precision: auto` means: f32 on GPUs and in mode wcsph_biot, whose position, density and
+    smoothing length stay f64 at either precision (docs/performance_wcsph.md, "Precision": f32 holds f64's
+    accuracy on the hydrostatic tank, the dam break, Terzaghi and Dupuit, and is faster); f64 for mode
+    isph on the CPU, whose fields are all of the run's precision."""
+    import taichi as ti
+
+    return "f64" if arch == ti.cpu and mode != "wcsph_biot" else "f32"
+
+
+def init(arch: str = "cpu", precision: str = "auto", threads: int | None = None, debug: bool = False,
+         mode: str | None = None) -> dict:
+    """Initialise Taichi once for this process. Returns {'arch': name, 'precision': 'f32'|'f64'}.
+    `mode` (the config's) decides what `precision: auto` means (`auto_precision`)."""
     import taichi as ti
 
     names = {"cpu": [ti.cpu], "cuda": [ti.cuda], "vulkan": [ti.vulkan], "auto": [ti.cuda, ti.cpu]}
@@ -24,7 +36,7 @@ def init(arch: str = "cpu", precision: str = "auto", threads: int | None = None,
     for candidate in names[arch]:
         fp = precision
         if fp == "auto":
-            fp = "f64" if candidate == ti.cpu else "f32"
+            fp = auto_precision(candidate, mode)
         kwargs = dict(arch=candidate, default_fp=ti.f64 if fp == "f64" else ti.f32, random_seed=0,
                       offline_cache=True, offline_cache_file_path=_cache_dir(), debug=debug,
                       log_level=os.environ.get("TI_LOG_LEVEL", "warn"))

@@ -119,7 +119,10 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     from .io.hdf5 import RunWriter
 
     out_path = out_path or cfg.output.path
-    be = backend.init(arch or cfg.arch, cfg.precision, cfg.threads)
+    precision = cfg.precision
+    if resume_from is not None and precision == "auto":
+        precision = _run_file_precision(out_path) or precision  # a resumed run goes on in its own precision
+    be = backend.init(arch or cfg.arch, precision, cfg.threads, mode=cfg.mode)
     scene = build_scene(cfg)
     log.info("%s; arch %s, %s", describe(scene), be["arch"], be["precision"])
 
@@ -489,6 +492,15 @@ class Checkpoints:
         self.last_step = self.solver.step_count
         log.info("checkpoint at t = %.6g s (step %d): %s", t, self.solver.step_count, path)
         return path
+
+
+def _run_file_precision(path) -> str | None:
+    """The precision a run file was written in (its root attribute), or None if it has none."""
+    from .io.hdf5 import RunFile
+
+    with RunFile(path) as rf:
+        value = rf.attrs.get("precision")
+    return None if value is None else str(value)
 
 
 def _resume_state(solver, checkpoint) -> dict:

@@ -90,6 +90,32 @@ def test_finished_run_resumes_without_checkpoint_every(run_cli, tmp_path, mode):
     assert len(list_checkpoints(half)) == 2  # the first run's end and the resumed run's end (keep: 2)
 
 
+def test_resume_keeps_the_precision_of_its_run_file(run_cli, tmp_path):
+    """`precision: auto` resolves by mode (f32 in mode wcsph_biot); a run written when auto meant f64 (its
+    config says auto, its file says f64) resumes in f64: the resumed run equals an uninterrupted f64 run
+    bit for bit, which an f32 continuation could not."""
+    import h5py
+
+    args = (*TANK, "--set", "mode=wcsph_biot", "--set", "precision=f64")
+    full, half = tmp_path / "full.h5", tmp_path / "half.h5"
+    assert run_cli(*args, "--set", "end_time=0.2", "--out", full).returncode == 0
+    assert run_cli(*args, "--set", "end_time=0.1", "--out", half).returncode == 0
+    with h5py.File(half, "r+") as f:  # as written before auto depended on the mode
+        text = f.attrs["config_yaml"]
+        text = text.decode() if isinstance(text, bytes) else str(text)
+        assert "precision: f64" in text
+        f.attrs["config_yaml"] = text.replace("precision: f64", "precision: auto")
+        assert f.attrs["precision"] in ("f64", b"f64")
+    proc = run_cli("resume", half, "--set", "end_time=0.2", "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    _same_runs(full, half)
+    fresh = tmp_path / "fresh.h5"  # a new run of the same config resolves auto to f32
+    proc = run_cli(*TANK, "--set", "mode=wcsph_biot", "--set", "end_time=0.02", "--out", fresh)
+    assert proc.returncode == 0, proc.stderr
+    with RunFile(fresh) as rf:
+        assert rf.attrs["precision"] == "f32"
+
+
 def _start(out, *extra):
     cmd = [sys.executable, "-m", "taichi_sph.cli", *TANK, "--out", str(out), *extra]
     return subprocess.Popen(cmd, cwd=ROOT, env=cli_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

@@ -18,11 +18,12 @@ serial part: Python, kernel launches, host reads), the split between phases and 
 lists were rebuilt. Writes the section "bench" of docs/performance_wcsph.md (or `--section`) and
 docs/performance_wcsph_bench.json.
 
-    python tools/bench_wcsph.py [--case ...] [--steps 300] [--warmup 200] [--precision f64 f32]
+    python tools/bench_wcsph.py [--case ...] [--steps 300] [--warmup 200] [--precision auto|f64|f32 ...]
                                 [--levee configs/embankment.yaml --saturated VARIANT --dry dry]
     python tools/bench_wcsph.py --against /path/to/other/checkout --rounds 3 [...]
 
-Each precision runs in its own process (one Taichi runtime per process). With --against, the same cases
+`--precision auto` (the default) is what a run of this mode gets without the key: f32 since it became the
+default, f64 in a checkout from before. Each precision runs in its own process (one Taichi runtime per process). With --against, the same cases
 (the same config files) also run with the package of another checkout, alternating with this one
 `--rounds` times, so that both see the same machine load; the table then gains the per-round CPU times
 and rates and their ratios, with the load average (os.getloadavg, 1 minute) at the start and end of
@@ -266,7 +267,10 @@ def run_one(args) -> list:
         sys.path.insert(0, str(CODE))
     from taichi_sph import backend
 
-    be = backend.init(args.arch, args.precision[0])
+    try:
+        be = backend.init(args.arch, args.precision[0], mode="wcsph_biot")
+    except TypeError:  # a checkout from before `precision: auto` depended on the mode (f64 on the CPU then)
+        be = backend.init(args.arch, args.precision[0])
     table = case_table(args)
     results = []
     for name in args.case:
@@ -401,7 +405,7 @@ def main():
         default=1,
         help="put the particles into cell order at every K-th list build only (solver.reorder_every)",
     )
-    ap.add_argument("--precision", nargs="+", default=["f64"], choices=["auto", "f32", "f64"])
+    ap.add_argument("--precision", nargs="+", default=["auto"], choices=["auto", "f32", "f64"])
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", default=str(ROOT / "docs" / "performance_wcsph.md"))
     ap.add_argument("--section", default="bench", help="section of --out that the tables replace")

@@ -90,7 +90,8 @@ class _Case(Strict):
     dt: Union[PosFloat, Literal["auto"]] = 0.001
     #: Taichi backend
     arch: Literal["cpu", "cuda", "vulkan", "auto"] = "cpu"
-    #: floating-point precision of fields (auto: f64 on CPU, f32 on GPUs)
+    #: floating-point precision of fields (auto: f32 on GPUs and in mode wcsph_biot, whose positions, density
+    #: and h stay f64; f64 for mode isph on the CPU; a resumed run keeps its run file's)
     precision: Literal["auto", "f32", "f64"] = "auto"
     #: CPU threads (default: all cores)
     threads: Optional[PosInt] = None

@@ -97,12 +97,14 @@ class WallMotion:
         n = scene.n
         self.body = ti.field(ti.i32, n)
         self.body.from_numpy(scene.body if scene.body is not None else np.full(n, -1, np.int32))
-        self.origin = ti.Vector.field(dim, float, n if self.motions else 1)
+        # the place in f64 at either precision, as mode wcsph_biot keeps positions: an f32 place differs
+        # from the motion by up to 6e-8 of the coordinate, which the guard's 1e-6 dx reads as a moved wall
+        self.origin = ti.Vector.field(dim, ti.f64, n if self.motions else 1)
         if self.motions:
-            self.origin.from_numpy(scene.position.astype(np_fp))
+            self.origin.from_numpy(scene.position.astype(np.float64))
         nb = max(len(self.motions), 1)
         self.vel = ti.Vector.field(dim, float, nb)
-        self.disp = ti.Vector.field(dim, float, nb)
+        self.disp = ti.Vector.field(dim, ti.f64, nb)
 
     @property
     def any(self) -> bool:
@@ -116,11 +118,11 @@ class WallMotion:
         """Velocity of every body over the step [t0, t1] and its displacement at t1."""
         if self.motions:
             self.vel.from_numpy(np.stack([m.step_velocity(t0, t1) for m in self.motions]).astype(self.np_fp))
-            self.disp.from_numpy(np.stack([m.displacement(t1) for m in self.motions]).astype(self.np_fp))
+            self.disp.from_numpy(np.stack([m.displacement(t1) for m in self.motions]).astype(np.float64))
 
     @ti.func
     def position(self, i):
-        """Place of moving-body particle i at the end of the step."""
+        """Place of moving-body particle i at the end of the step (f64)."""
         xn = self.origin[i] + self.disp[self.body[i]]
         if ti.static(self.periodic):
             xn = operators.wrap(xn, self.period)
@@ -140,4 +142,4 @@ class WallMotion:
         """Moving-body particles to their place at the end of the step."""
         for i in range(n):
             if self.body[i] >= 0:
-                x[i] = self.position(i)
+                x[i] = ti.cast(self.position(i), x.dtype)
