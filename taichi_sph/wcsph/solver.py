@@ -66,8 +66,13 @@ _NRED = 9
 CFL_STABLE = 0.64
 #: scenes with fewer fluid particles run their loops serially: thread dispatch costs ~55 us per loop.
 #: Measured per step on 2 cores, serial / parallel: 500 particles 0.44 / 0.67 ms, 1200 0.77 / 0.91 ms,
-#: 2450 equal
+#: 2450 equal; 5000 (dam break, dx 2 cm) 1.27 / 0.99 ms
 SERIAL_BELOW = 2000
+#: the same for scenes with soil, whose step has five parallel loops instead of two (the soil passes):
+#: measured on 2 cores, f32, wall ms per step serial / parallel: levee of configs/embankment.yaml
+#: (2686 moving particles) 1.78-1.91 / 1.95-2.03, its dry variant (2517) 1.20-1.26 / 1.33-1.43; at
+#: dx 8.5 mm (3767) 2.39-2.42 / 2.34-2.41; at dx 7 mm (5411) 3.50-3.55 / 2.88-2.89
+SERIAL_BELOW_SOIL = 4000
 
 
 @ti.data_oriented
@@ -169,7 +174,7 @@ class WCSPHSolver(SolverCommon):
         self.Q_RHO, self.Q_PR, self.Q_H = 0, 1, 2
         self.nq = 3 if self.variable_h else 2
         # small scenes run their loops serially: a parallel loop costs ~50 us of thread dispatch
-        self.serial = self.n_fluid + self.n_soil < SERIAL_BELOW
+        self.serial = self.n_fluid + self.n_soil < (SERIAL_BELOW_SOIL if self.n_soil else SERIAL_BELOW)
 
         vec = ti.Vector.field
         self.s = vec(self.ns, float, n)
@@ -438,7 +443,7 @@ class WCSPHSolver(SolverCommon):
                     xn = self.motion.position(i)
                     self.x[i] = xn
                     for d in ti.static(range(self.dim)):
-                        self.s[i][d] = xn[d]
+                        self.s[i][d] = ti.cast(xn[d], float)
                         self.s[i][self.S_V + d] = vb[d]
                     dd = operators.rel(xn, self.x0[i], self.period)
                     ti.atomic_max(d2max, ti.cast(dd.dot(dd), float))
