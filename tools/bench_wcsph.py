@@ -359,7 +359,7 @@ def comparison_markdown(rounds, against: str) -> str:
         "average at the start / end of each run, and the ratios other / this of the CPU time per step "
         "(the measure that other processes disturb least) and this / other of the wall-clock rate.",
         "",
-        "| case | precision | round | this: CPU ms/step | main | CPU/wall | M p-steps/s | load | "
+        "| case | precision (this / other) | round | this: CPU ms/step | main | CPU/wall | M p-steps/s | load | "
         "other: CPU ms/step | main | CPU/wall | M p-steps/s | load | CPU ratio | rate ratio |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -367,10 +367,11 @@ def comparison_markdown(rounds, against: str) -> str:
     for k, (new, old) in enumerate(rounds):
         for a, b in zip(new, old):
             ratio, cratio = a["mipps"] / b["mipps"], b["cpu_seconds_per_step"] / a["cpu_seconds_per_step"]
-            ratios.setdefault((a["name"], a["precision"]), []).append((cratio, ratio))
+            prec = a["precision"] if a["precision"] == b["precision"] else f"{a['precision']} / {b['precision']}"
+            ratios.setdefault((a["name"], prec), []).append((cratio, ratio))
             la, lb = a["load_start_end"], b["load_start_end"]
             lines.append(
-                f"| {a['name']} | {a['precision']} | {k + 1} | {1e3 * a['cpu_seconds_per_step']:.2f} | "
+                f"| {a['name']} | {prec} | {k + 1} | {1e3 * a['cpu_seconds_per_step']:.2f} | "
                 f"{1e3 * a['main_thread_cpu_seconds_per_step']:.2f} | {a['cpu_over_wall']:.2f} | "
                 f"{a['mipps']:.2f} | {la[0]:.1f} / {la[1]:.1f} | {1e3 * b['cpu_seconds_per_step']:.2f} | "
                 f"{1e3 * b['main_thread_cpu_seconds_per_step']:.2f} | {b['cpu_over_wall']:.2f} | "
