@@ -121,10 +121,11 @@ class MarkerSet:
         self.eps0 = ti.field(float, m)
         self.d50 = ti.field(float, m)
         self.volume = ti.field(float, m)
-        self.position.from_numpy(np.asarray(markers["position"]))
-        self.eps0.from_numpy(np.asarray(markers["eps0"]))
-        self.d50.from_numpy(np.asarray(markers["d50"]))
-        self.volume.from_numpy(np.asarray(markers["volume"]))
+        fp = np.float64 if self.position.dtype == ti.f64 else np.float32  # the run's precision
+        self.position.from_numpy(np.asarray(markers["position"], dtype=fp))
+        self.eps0.from_numpy(np.asarray(markers["eps0"], dtype=fp))
+        self.d50.from_numpy(np.asarray(markers["d50"], dtype=fp))
+        self.volume.from_numpy(np.asarray(markers["volume"], dtype=fp))
         # markers outside the particle grid box grown by one support radius cannot be reached by any
         # particle: the grid drops them (the margin keeps the images of markers across a periodic side)
         lo = np.asarray(lo, float) - support_radius

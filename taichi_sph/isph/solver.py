@@ -836,7 +836,7 @@ class ISPHSolver(SolverCommon):
     def _k_scatter_pressure(self, psol: ti.template()):
         for i in range(self.n):
             if self.kind[i] == WATER:
-                self.p[i] = psol[self.row[i]]
+                self.p[i] = ti.cast(psol[self.row[i]], float)  # the PPE may solve in f64 (ppe_precision)
 
     @ti.kernel
     def _k_gather_pressure(self, psol: ti.template()):
