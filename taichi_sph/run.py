@@ -207,9 +207,10 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             fields = extras.after_step(t, lambda: _with_flag(solver.fields_by_id()))
             _observe(solver, t, extras.readings)
             frame_due = t >= next_out - 1e-9 * every
+            if frame_due and fields is None:
+                fields = _with_flag(solver.fields_by_id())
             if frame_due or guard.due(solver.step_count):
-                fields = fields if fields is not None else _with_flag(solver.fields_by_id())
-                guard.check_fields(solver.step_count, t, fields)
+                guard.check_fields(solver.step_count, t, fields if fields is not None else solver.guard_fields())
             if frame_due:
                 extras.after_frame(writer.write_frame(t, fields), t, fields)
                 _flush_diag(writer, diag)

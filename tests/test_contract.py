@@ -65,6 +65,12 @@ def test_built_solvers_satisfy_the_contract(ti_cpu, mode):
     # frames are in particle-id order: the walls have not moved from the scene's places
     wall = np.asarray(scene.kind) == 1
     assert np.array_equal(fields["position"][wall], np.asarray(scene.position)[wall])
+    # the guard's cheaper gather reads the same particles in the same order (velocity as stored)
+    checked = solver.guard_fields()
+    assert set(checked) == {"position", "velocity", "pressure", "density", "active"}
+    for key in ("position", "pressure", "density", "active"):
+        assert np.array_equal(checked[key], fields[key]), key
+    assert checked["velocity"].shape == fields["velocity"].shape
     state = solver.state()
     solver.step(dt)
     solver.load_state(state)

@@ -63,6 +63,9 @@ _GRAD = {"corrected": GRAD_CORRECTED, "difference": GRAD_DIFFERENCE, "symmetric"
 class ISPHSolver(SolverCommon):
     """State and step of mode `isph`. Built from a validated Config and a Scene."""
 
+    #: the density the guard checks (guard_fields): the same as fields_by_id reports
+    density_field = "rho_n"
+
     #: the per-step diagnostics step() reports (run.DIAG_COLUMNS lists every mode's)
     diagnostic_names = ("kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
                         "free_surface", "collisions", "isolated", "closed_bodies")

@@ -5,7 +5,10 @@ import math
 import time as _time
 from types import MappingProxyType
 
+import numpy as np
+
 from ..instability import out_of_domain
+from ..kinds import WALL
 
 
 class SolverCommon:
@@ -24,6 +27,29 @@ class SolverCommon:
     def propose_dt(self) -> tuple[float, int]:
         """Only solvers with `proposes_dt` choose their own time step."""
         raise NotImplementedError(f"{type(self).__name__} does not choose its time step (proposes_dt is False)")
+
+    #: the per-particle density field that guard_fields reports
+    density_field = "rho"
+
+    def guard_fields(self) -> dict:
+        """What the guard's full check reads (guard.check_fields) every `guard.every` steps, in id order:
+        position, velocity (as stored: finiteness is all the check asks of it), pressure, density (the
+        water's at wall particles, as fields_by_id reports) and active. Five host reads instead of
+        fields_by_id's frame: 0.40 against 2.57 ms at the shipped levee (its soil output and wall
+        pressure), which every tenth step made 0.2 ms of a 1.7 ms step."""
+        n = self.n
+        ids = self.ids.to_numpy()[:n]
+        order = np.empty(n, dtype=np.int64)
+        order[ids] = np.arange(n)
+        kind = self.kind.to_numpy()[:n][order]
+        rho = getattr(self, self.density_field).to_numpy()[:n][order]
+        return {
+            "position": self.x.to_numpy()[:n][order],
+            "velocity": self.v.to_numpy()[:n][order],
+            "pressure": self.p.to_numpy()[:n][order],
+            "density": np.where(kind == WALL, self.rho_w, rho),
+            "active": self.active.to_numpy()[:n][order].astype(bool),
+        }
 
     def max_speed_bound(self) -> float:
         """Speed above which the guard stops the run: `guard.max_speed`, or 20 sqrt(g H) with H the tank's
