@@ -1,7 +1,7 @@
 """Numbers and pictures of the seepage-failure cases (docs/levee.md, docs/sheetpile.md) from their run files.
 
-    python tools/seepage_failure.py levee STAGE1.h5 STAGE2.h5 [--toe 2.26] [--dx 0.01]
-    python tools/seepage_failure.py dry RUN.h5 [--entry 1.26] [--toe 2.26] [--k 0.03] [--porosity 0.4]
+    python tools/seepage_failure.py levee STAGE1.h5 STAGE2.h5 [--toe 2.26] [--dx DX]
+    python tools/seepage_failure.py dry RUN.h5 [--entry 1.26] [--toe 2.26] [--k 0.03] [--porosity 0.4] [--dx DX]
     python tools/seepage_failure.py sheetpile RUN.h5 [--embed 0.06] [--bed 0.2] [--length 0.54] [--at 0.12]
     python tools/seepage_failure.py figure RUN.h5 --times 0,20,40 --out PNG [--xlim 1.1,2.76] [--cols 1]
 
@@ -46,6 +46,7 @@ def _probe(rf: RunFile, name: str):
 
 
 def levee(a) -> dict:
+    _spacing(a, a.stage2)
     with RunFile(a.stage1) as rf:
         soil = np.asarray(rf.kind) == failure.SOIL
         x0 = np.asarray(rf.field("position", 0), float)[soil]
@@ -102,7 +103,15 @@ def levee(a) -> dict:
     return out
 
 
+def _spacing(a, path) -> None:
+    """--dx, or the run file's own spacing: a coarse run read at a finer dx misses its bottom row."""
+    if a.dx is None:
+        with RunFile(path) as rf:
+            a.dx = float(rf.dx)
+
+
 def dry(a) -> dict:
+    _spacing(a, a.run)
     wf = failure.wetting_front(a.run, a.dx, a.entry)
     t = np.asarray(wf["time"])
     front = np.asarray(wf["front"])
@@ -244,7 +253,7 @@ def main() -> None:
     lv.add_argument("stage1")
     lv.add_argument("stage2")
     lv.add_argument("--toe", type=float, default=2.26, help="x of the landside toe (m)")
-    lv.add_argument("--dx", type=float, default=0.01)
+    lv.add_argument("--dx", type=float, default=None, help="particle spacing (m); default: the run file's")
     dr = sub.add_parser("dry")
     dr.add_argument("run")
     dr.add_argument("--entry", type=float, default=1.26, help="riverside toe x (m)")
@@ -254,7 +263,7 @@ def main() -> None:
     dr.add_argument("--t-ref", dest="t_ref", type=float, default=2.0, help="the advance's start time (s)")
     dr.add_argument("--shape-times", dest="shape_times", type=lambda s: [float(v) for v in s.split(",")],
                     default=[5.0, 10.0, 20.0])
-    dr.add_argument("--dx", type=float, default=0.01)
+    dr.add_argument("--dx", type=float, default=None, help="particle spacing (m); default: the run file's")
     sp = sub.add_parser("sheetpile")
     sp.add_argument("run")
     sp.add_argument("--embed", type=float, default=0.06, help="pile embedment D (m)")
