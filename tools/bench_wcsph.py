@@ -23,12 +23,12 @@ docs/performance_wcsph_bench.json.
     python tools/bench_wcsph.py --against /path/to/other/checkout --rounds 3 [...]
 
 `--precision auto` (the default) is what a run of this mode gets without the key: f32 since it became the
-default, f64 in a checkout from before. Each precision runs in its own process (one Taichi runtime per process). With --against, the same cases
-(the same config files) also run with the package of another checkout, alternating with this one
-`--rounds` times, so that both see the same machine load; the table then gains the per-round CPU times
-and rates and their ratios, with the load average (os.getloadavg, 1 minute) at the start and end of
-each run. On a shared machine compare CPU time per step, not wall time: a thread that waits for a core
-costs no CPU time.
+default, f64 in a checkout from before. Each precision runs in its own process (one Taichi runtime per
+process). With --against, the same cases (the same config files) also run with the package of another
+checkout, alternating with this one `--rounds` times, so that both see the same machine load; the table
+then gains the per-round CPU times and rates and their ratios, with the load average (os.getloadavg, 1
+minute) at the start and end of each run. On a shared machine compare CPU time per step, not wall time:
+a thread that waits for a core costs no CPU time.
 """
 
 from __future__ import annotations

@@ -202,7 +202,7 @@ class ISPHSolver(SolverCommon):
         self.p.fill(0.0)
         # obstacles with a prescribed motion (sph/wall_motion.py): their wall velocity enters the wall
         # conditions through self.v of the wall particles
-        self.motion = WallMotion(scene, dim, self.period, self.np_fp)
+        self.motion = WallMotion(scene, dim, self.period)
         self.wall_body = self.motion.body
         self.wall_origin = self.motion.origin
         self.particle_fields += self.motion.fields()

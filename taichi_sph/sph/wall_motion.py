@@ -88,8 +88,7 @@ class WallMotion:
     to rounding. The solver lists `body` and `origin` among its particle fields (reordered with them)
     and its checkpoint fields."""
 
-    def __init__(self, scene, dim: int, period, np_fp):
-        self.np_fp = np_fp
+    def __init__(self, scene, dim: int, period):
         self.motions = list(scene.motions)
         self.dim = dim
         self.period = period

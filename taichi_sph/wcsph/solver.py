@@ -240,7 +240,7 @@ class WCSPHSolver(SolverCommon):
         self.rate.fill(0.0)
         # obstacles with a prescribed motion (sph/wall_motion.py), moved by the kick-drift; their wall
         # particles' v is the wall velocity of eq 50-51
-        self.motion = WallMotion(scene, dim, self.period, f)
+        self.motion = WallMotion(scene, dim, self.period)
         self.wall_body = self.motion.body
         self.wall_origin = self.motion.origin
         self.moving = sw.moving_walls
