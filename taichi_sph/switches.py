@@ -52,6 +52,8 @@ class Switches:
     ground_tension: bool | None = _switch((ISPH,), "with the cone: free water next to the ground that the pressure "
                                                    "equation holds in tension becomes free surface "
                                                    "(isph.ground_surface_tension)")
+    air_entry: bool | None = _switch((ISPH,), "pore water's suction clamped at the ground's air-entry value "
+                                              "(porous ground and isph.air_entry_suction)")
     ground_correction: bool | None = _switch((ISPH,), "the kernel-gradient correction also inside saturated porous ground of weak drag "
                                                       "(gradient corrected and isph.ground_gradient_correction)")
     shifting: bool | None = _switch((ISPH,), "particle shifting (isph.shifting > 0)")
@@ -93,6 +95,7 @@ class Switches:
                        ground_cone=bool(scene.markers) and i.ground_surface_cone > 0.0,
                        ground_tension=bool(scene.markers) and i.ground_surface_cone > 0.0
                        and i.ground_surface_tension,
+                       air_entry=bool(scene.markers) and i.air_entry_suction is not None,
                        ground_correction=bool(scene.markers) and i.gradient == "corrected"
                        and i.ground_gradient_correction,
                        turbulence=cfg.fluid.turbulence == "smagorinsky",

@@ -105,6 +105,8 @@ class ISPHSolver(SolverCommon):
         self.pore_advection = sw.pore_advection
         # porous ground only when the scene has soil markers (ti.static: otherwise compiled out)
         self.porous = sw.porous
+        # pore water holds no suction beyond the ground's air-entry value (isph.air_entry_suction)
+        self.suction_floor = float(cfg.isph.air_entry_suction) if sw.air_entry else 0.0
         self.alpha_c = cfg.soil.alpha_c
         self.beta_c = cfg.soil.beta_c
         # surface test in and next to the ground: the count's candidates confirmed by an empty cone
@@ -839,7 +841,11 @@ class ISPHSolver(SolverCommon):
     def _k_scatter_pressure(self, psol: ti.template()):
         for i in range(self.n):
             if self.kind[i] == WATER:
-                self.p[i] = ti.cast(psol[self.row[i]], float)  # the PPE may solve in f64 (ppe_precision)
+                pi = ti.cast(psol[self.row[i]], float)  # the PPE may solve in f64 (ppe_precision)
+                if ti.static(self.suction_floor > 0.0):
+                    if self.eps[i] < 1.0:
+                        pi = ti.max(pi, -self.suction_floor)
+                self.p[i] = pi
 
     @ti.kernel
     def _k_gather_pressure(self, psol: ti.template()):
