@@ -116,8 +116,8 @@ class ISPH(Strict):
     #: suction (Pa, positive) that pore water (eps < 1) holds at most: its solved pressure is clamped at
     #: minus this value before the corrector (the ground's air-entry suction: beyond it air enters the
     #: pores, and the model has no capillarity). Off by default (null). At 2 rho_w g H (H the water's
-    #: height at the start) the porous dam break at dx 5 mm with dt auto ran to 2 s (it stopped at 1.09 s
-    #: without), the free fall at eps0 0.8, dx 1 cm past its stop at 1.11 s, and the permeameter's level
+    #: height at the start) the porous dam break at dx 5 mm with dt auto ran to 2 s at cfl 0.2 (it stopped
+    #: at 1.09 s without; at cfl 0.15 it stopped at 1.53 s, so not robustly), the free fall at eps0 0.8, dx 1 cm past its stop at 1.11 s, and the permeameter's level
     #: stayed within 1 % of the ODE at dx 5 mm; at rho_w g H the permeameter stalled at dx 5 mm, dt
     #: 0.25 ms (docs/isph.md, "A suction floor on the pore pressure")
     air_entry_suction: Optional[PosFloat] = None
