@@ -186,27 +186,35 @@ def permeameter_runs(tmp_path_factory):
     level above the plug (porosity.column_level) against the falling-head ODE with the inertia of the
     column and the plug, the plug core's share of Dirichlet rows, and its water per pore volume counted
     without a kernel (particles in the core, times their bulk volume dx^2 / eps, over the core's area)."""
-    from taichi_sph.isph.porosity import column_level
-
     out = {}
     for dt in (0.001, 0.0005):
         path = tmp_path_factory.mktemp("pm") / "pm.h5"
-        r = subprocess.run([sys.executable, "-m", "taichi_sph.cli", "--config", "configs/permeameter.yaml",
-                            "--set", "dx=0.005", "--set", f"dt={dt}", "--set", "end_time=0.44",
-                            "--set", "output.every=0.01", "--out", str(path), "--no-progress"],
-                           cwd=ROOT, env=cli_env(), capture_output=True, text=True, timeout=900)
-        assert r.returncode == 0, r.stderr
-        with RunFile(path) as rf:
-            w = rf.kind == 0
-            frames = [rf.frame(i) for i in range(rf.n_frames)]
-            h = np.array([column_level(f["position"][w & f["active"]][:, -1], 0.40, rf.dx) for f in frames])
-            t = rf.times
-            core = [(w & f["active"] & (f["position"][:, 1] > 0.312) & (f["position"][:, 1] < 0.388)) for f in frames]
-            flagged = np.mean([f["free_surface"][c].mean() for f, c in zip(frames, core)])
-            fill = np.array([np.sum(rf.dx**2 / f["porosity"][c]) / (0.10 * 0.076) for f, c in zip(frames, core)])
+        t, h, frames, w, dx = _permeameter_run(path, dt)
+        core = [(w & f["active"] & (f["position"][:, 1] > 0.312) & (f["position"][:, 1] < 0.388)) for f in frames]
+        flagged = np.mean([f["free_surface"][c].mean() for f, c in zip(frames, core)])
+        fill = np.array([np.sum(dx**2 / f["porosity"][c]) / (0.10 * 0.076) for f, c in zip(frames, core)])
         dev, half, dev_q = _level_deviation(t, h)
         out[dt] = (t, dev, half, flagged, fill, dev_q)
     return out
+
+
+def _permeameter_run(path, dt, *sets):
+    """configs/permeameter.yaml at dx 5 mm and dt to 0.44 s (frames every 10 ms), with `--set` overrides
+    `sets`: the frame times, the level above the plug (porosity.column_level), the frames, the water mask
+    and dx."""
+    from taichi_sph.isph.porosity import column_level
+
+    extra = [a for s in sets for a in ("--set", s)]
+    r = subprocess.run([sys.executable, "-m", "taichi_sph.cli", "--config", "configs/permeameter.yaml",
+                        "--set", "dx=0.005", "--set", f"dt={dt}", "--set", "end_time=0.44",
+                        "--set", "output.every=0.01", *extra, "--out", str(path), "--no-progress"],
+                       cwd=ROOT, env=cli_env(), capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr
+    with RunFile(path) as rf:
+        w = rf.kind == 0
+        frames = [rf.frame(i) for i in range(rf.n_frames)]
+        h = np.array([column_level(f["position"][w & f["active"]][:, -1], 0.40, rf.dx) for f in frames])
+        return rf.times, h, frames, w, rf.dx
 
 
 def _level_deviation(t, h):
@@ -230,22 +238,9 @@ def test_air_entry_suction_keeps_the_permeameter_on_the_ode(tmp_path):
     run each): largest deviation 0.27 / 0.89 % at dt 1 / 0.5 ms, the time steps within 0.98 points of each
     other (without the key: 0.3 / 1.0 %, 1.2 points). Bound 3 %, the acceptance value, as in the test
     without the key."""
-    from taichi_sph.isph.porosity import column_level
-
     devs = {}
     for dt in (0.001, 0.0005):
-        path = tmp_path / f"pm_{dt}.h5"
-        r = subprocess.run([sys.executable, "-m", "taichi_sph.cli", "--config", "configs/permeameter.yaml",
-                            "--set", "dx=0.005", "--set", f"dt={dt}", "--set", "end_time=0.44",
-                            "--set", "output.every=0.01", "--set", "isph.air_entry_suction=5886",
-                            "--out", str(path), "--no-progress"],
-                           cwd=ROOT, env=cli_env(), capture_output=True, text=True, timeout=900)
-        assert r.returncode == 0, r.stderr
-        with RunFile(path) as rf:
-            w = rf.kind == 0
-            h = np.array([column_level(rf.field("position", i)[w & rf.field("active", i)][:, -1], 0.40, rf.dx)
-                          for i in range(rf.n_frames)])
-            t = rf.times
+        t, h, _, _, _ = _permeameter_run(tmp_path / f"pm_{dt}.h5", dt, "isph.air_entry_suction=5886")
         dev, half, _ = _level_deviation(t, h)
         assert half.sum() > 20
         devs[dt] = dev[half]

@@ -1188,9 +1188,7 @@ class ISPHSolver(SolverCommon):
     def fields_by_id(self) -> dict:
         """Per-particle arrays in id order (SPEC 8 frame fields)."""
         n = self.n
-        ids = self.ids.to_numpy()[:n]
-        order = np.empty(n, dtype=np.int64)
-        order[ids] = np.arange(n)
+        order = self._id_order()
         kind = self.kind.to_numpy()[:n][order]
         rho = self.rho_n.to_numpy()[:n][order]
         rho = np.where(kind == WATER, rho, self.rho_w)

@@ -792,13 +792,12 @@ class WCSPHSolver(SolverCommon):
         """Per-particle arrays in id order (SPEC 8 frame fields); pressures relative to the ambient."""
         n = self.n
         self.wall_pressure.update()
-        ids = self.ids.to_numpy()[:n]
-        order = np.empty(n, dtype=np.int64)
-        order[ids] = np.arange(n)
+        order = self._id_order()
         kind = self.kind.to_numpy()[order]
-        vel = self.v.to_numpy()[order] + 0.5 * self.dt_prev * self.a.to_numpy()[order]
+        v = self.v.to_numpy()[order]
+        vel = v + 0.5 * self.dt_prev * self.a.to_numpy()[order]
         wall = kind == WALL
-        vel[wall] = self.v.to_numpy()[order][wall]  # zero, or a moving obstacle's velocity
+        vel[wall] = v[wall]  # zero, or a moving obstacle's velocity
         rho = self.rho.to_numpy()[order]
         rho = np.where(kind == WALL, self.rho_w, rho)
         out = {
