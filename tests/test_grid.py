@@ -121,6 +121,41 @@ def test_neighbour_lists_match_brute_force(ti_cpu, dim, n):
     np.testing.assert_array_equal(grid.perm.to_numpy()[:n], np.arange(n))
 
 
+def test_grouped_lists_order_each_row_by_group(ti_cpu):
+    """A grouped grid's rows hold the same neighbours as the plain build, in group order 0, 1, 2 (each group
+    in the build's ascending order), and nbr_split gives where groups 1 and 2 start."""
+    dim, n = 2, 3000
+    capacity = n + 11
+    lo, hi, pos, active, mask = make_case(dim, n, capacity, seed=7)
+    x, act, msk, ids = make_fields(dim, capacity, pos, active, mask)
+    group = ti.field(ti.i32, capacity)
+    groups = np.random.default_rng(3).integers(0, 3, capacity).astype(np.int32)
+    group.from_numpy(groups)
+    plain = NeighbourGrid(capacity, dim, lo, hi, CELL, max_neighbours=400)
+    grouped = NeighbourGrid(capacity, dim, lo, hi, CELL, max_neighbours=400, grouped=True)
+    for grid in (plain, grouped):
+        grid.sort(x, act, n)
+        grid.build_neighbour_lists(x, msk, n, RADIUS, in_place=False)
+    grouped.group_rows(group, n)
+    count = plain.nbr_count.to_numpy()[:n]
+    np.testing.assert_array_equal(grouped.nbr_count.to_numpy()[:n], count)
+    before = plain.nbr.to_numpy()[:n]
+    after = grouped.nbr.to_numpy()[:n]
+    split = grouped.nbr_split.to_numpy()[:n]
+    rows = np.nonzero(count > 0)[0]
+    assert len(rows) > 1000
+    for i in rows:
+        row = before[i, : count[i]]
+        expect = np.concatenate([row[groups[row] == g] for g in range(3)])
+        np.testing.assert_array_equal(after[i, : count[i]], expect)
+        assert tuple(split[i]) == (np.sum(groups[row] == 0), np.sum(groups[row] <= 1))
+    # grouping again leaves the rows as they are (a restored state is grouped once more)
+    grouped.group_rows(group, n)
+    np.testing.assert_array_equal(grouped.nbr.to_numpy()[:n], after)
+    with pytest.raises(RuntimeError, match="grouped=True"):
+        plain.group_rows(group, n)
+
+
 def test_overflow_names_particle(ti_cpu):
     dim, n = 2, 3000
     capacity = n + 37

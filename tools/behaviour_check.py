@@ -53,7 +53,7 @@ CASES = [
 FIELDS = ("position", "velocity", "pressure")
 
 
-def run_cases(src: Path, out: Path, only: list[str] | None) -> int:
+def run_cases(src: Path, out: Path, only: list[str] | None, sets: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, PYTHONPATH=str(src), TI_CPU_MAX_NUM_THREADS="1", TAICHI_SPH_PROGRESS="0",
                TI_LOG_LEVEL="warn")
@@ -62,7 +62,7 @@ def run_cases(src: Path, out: Path, only: list[str] | None) -> int:
         if only and name not in only:
             continue
         cmd = [sys.executable, "-m", "taichi_sph.cli", "--config", str(src / "configs" / f"{config}.yaml"),
-               *extra, "--set", "threads=1", "--set", "output.every=0.001", "--out", str(out / f"{name}.h5"),
+               *extra, *[a for kv in sets or () for a in ("--set", kv)], "--set", "threads=1", "--set", "output.every=0.001", "--out", str(out / f"{name}.h5"),
                "-q"]
         with open(out / f"{name}.log", "w") as log:
             rc = subprocess.call(cmd, cwd=src, env=env, stdout=log, stderr=subprocess.STDOUT)
@@ -108,13 +108,15 @@ def main() -> int:
     r.add_argument("--src", type=Path, default=Path("."), help="checkout whose package and configs run")
     r.add_argument("--out", type=Path, required=True, help="folder for the run files")
     r.add_argument("--case", action="append", help="only this case (repeatable)")
+    r.add_argument("--set", dest="sets", action="append", metavar="KEY=VALUE",
+                   help="config override for every case, e.g. precision=f64 (repeatable)")
     c = sub.add_parser("compare", help="compare two folders of run files")
     c.add_argument("a", type=Path)
     c.add_argument("b", type=Path)
     c.add_argument("--tol", type=float, default=0.0, help="largest difference accepted (default 0)")
     args = ap.parse_args()
     if args.cmd == "run":
-        return run_cases(args.src.resolve(), args.out.resolve(), args.case)
+        return run_cases(args.src.resolve(), args.out.resolve(), args.case, args.sets)
     return compare(args.a, args.b, args.tol)
 
 

@@ -56,7 +56,8 @@ def _is_cpu_arch(arch) -> bool:
 class NeighbourGrid:
     """Cell grid, counting sort and explicit neighbour lists for up to `capacity` particles."""
 
-    def __init__(self, capacity: int, dim: int, lo, hi, cell_size: float, max_neighbours: int, period=None):
+    def __init__(self, capacity: int, dim: int, lo, hi, cell_size: float, max_neighbours: int, period=None,
+                 grouped: bool = False):
         if dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, not {dim}")
         lo = np.asarray(lo, dtype=float).reshape(-1).copy()
@@ -114,6 +115,11 @@ class NeighbourGrid:
         self._ovf_index = ti.field(ti.i32, ())
         self._scratch = {}
         self._sorted_n = None
+        #: `grouped`: `group_rows` orders each list by the neighbours' group (0, 1, 2) and keeps where groups
+        #: 1 and 2 start in `nbr_split[i]`, so that a pass that needs some groups walks only their range
+        self.grouped = bool(grouped)
+        self.nbr_split = ti.Vector.field(2, ti.i32, self.capacity if grouped else 1)
+        self._row = ti.field(ti.i32, (self.capacity, self.max_neighbours) if grouped else (1, 1))
 
     # ------------------------------------------------------------------ sort
     @ti.kernel
@@ -337,6 +343,44 @@ class NeighbourGrid:
             count = int(self._ovf_max[None])
             pid = int(ids[index]) if ids is not None else None
             raise NeighbourOverflowError(index, pid, count, self.max_neighbours, rows)
+
+    @ti.kernel
+    def _group_rows(self, group: ti.template(), n: ti.i32):
+        for i in range(n):
+            cnt = self.nbr_count[i]
+            c0 = 0
+            c1 = 0
+            for k in range(cnt):
+                j = self.nbr[i, k]
+                self._row[i, k] = j
+                g = group[j]
+                if g == 0:
+                    c0 += 1
+                elif g == 1:
+                    c1 += 1
+            p0 = 0
+            p1 = c0
+            p2 = c0 + c1
+            for k in range(cnt):
+                j = self._row[i, k]
+                g = group[j]
+                if g == 0:
+                    self.nbr[i, p0] = j
+                    p0 += 1
+                elif g == 1:
+                    self.nbr[i, p1] = j
+                    p1 += 1
+                else:
+                    self.nbr[i, p2] = j
+                    p2 += 1
+            self.nbr_split[i] = ti.Vector([c0, c0 + c1])
+
+    def group_rows(self, group, n: int):
+        """Order the first n lists by the group of each neighbour (`group[j]` in 0, 1, 2; stable within a
+        group) and set `nbr_split[i]` = (start of group 1, start of group 2). A grid built with `grouped`."""
+        if not self.grouped:
+            raise RuntimeError("group_rows() needs a grid built with grouped=True")
+        self._group_rows(group, int(n))
 
     @ti.kernel
     def _max_count(self, n: ti.i32) -> ti.i32:

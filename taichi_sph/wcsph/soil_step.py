@@ -6,9 +6,9 @@ fluid pair terms skip them. Per step:
 1. stress update (`stress_at`), in the pair pass of solver.py at x^{n+1} with v^{n+1/2}: velocity
    gradient from soil neighbours and walls (virtual velocity of eq 50-51), strain and spin rates
    (eq 37-38), density by eq 48, effective stress by eq 42-45 (soil.py).
-2. force pass (`_forces_pass`), after the pair pass: first the pore pressure p_i = sum_w V_j p_j W_ij /
-   sum_w V_j W_ij from the water's new pressure (eq 5, Shepard-normalised) and the water presence
-   (`_pore_at`), then eq 35 with eq 36, gravity, the pore-pressure force -grad p / rho_s (per unit
+2. force pass (`_forces_pass`), after the pair pass, one walk over the neighbours: the pore pressure p_i =
+   sum_w V_j p_j W_ij / sum_w V_j W_ij from the water's new pressure (eq 5, Shepard-normalised) and the
+   water presence, and eq 35 with eq 36, gravity, the pore-pressure force -grad p / rho_s (per unit
    soil mass, the (1 - n) grad p of the mixture theory over the soil's (1 - n) rho_s) and an optional
    damping (`wcsph.soil.fixed`: the skeleton is rigid, its acceleration and drag are zero).
 3. drag passes (`_drag_water_pass`, `_drag_soil_pass`, `_drag_water_after_pass`): the water's mixture momentum
@@ -138,19 +138,17 @@ class SoilPasses:
     def stress_at(self, i, dt):
         """Soil particle i in the pair pass of solver.py: strain and spin rates (eq 37-38), density (eq 48),
         stress (eq 42-45). Reads the packed view s of its soil and wall neighbours only (the water's
-        pressure of this step is not known yet: `_pore_at` interpolates it after the pass)."""
+        pressure of this step is not known yet: `_forces_pass` interpolates it after the pass)."""
         fl = self.fl
         si = fl.s[i]
         xi = fl._pos(si)
         vi = fl._vel(si)
         h = fl.h0
         L = ti.Matrix.zero(float, fl.dim, fl.dim)
-        for k in range(fl.grid.nbr_count[i]):
+        for k in range(fl.nbr_fluid(i)):  # soil and walls
             j = fl.grid.nbr[i, k]
             sj = fl.s[j]
             kj = sj[fl.S_KIND]
-            if kj != SOIL and kj != WALL:
-                continue
             rij = operators.rel(xi, fl._pos(sj), fl.period)
             r2 = rij.dot(rij)
             if r2 >= 4.0 * h * h or r2 == 0.0:
@@ -180,46 +178,6 @@ class SoilPasses:
             self.phi_w[i] = 0.0
 
     @ti.func
-    def _neighbour(self, i, k, xi):
-        """The k-th listed neighbour j of particle i (at xi), its kind and r^2 = |x_i - x_j|^2 (minimum
-        image), read from the particle store (not the packed view)."""
-        fl = self.fl
-        j = fl.grid.nbr[i, k]
-        rij = operators.rel(xi, fl.xf(j), fl.period)
-        return j, fl.kind[j], rij.dot(rij)
-
-    @ti.func
-    def _pore_at(self, i):
-        """Pore pressure at soil particle i from the water's pressure of this step, p_i = sum_w V_j p_j W_ij /
-        sum_w V_j W_ij (eq 5, Shepard-normalised), and the water presence phi_w; the first of two walks over
-        i's neighbours in `_forces_pass` (only i's own values are read there)."""
-        fl = self.fl
-        h = fl.h0
-        xi = fl.xf(i)
-        pn = 0.0
-        pd = 0.0
-        pdw = 0.0
-        for k in range(fl.grid.nbr_count[i]):
-            j, kj, r2 = self._neighbour(i, k, xi)
-            if (kj != WATER and kj != WALL) or r2 >= 4.0 * h * h:
-                continue
-            wij = kernels.w(ti.sqrt(r2), h, fl.dim)
-            if kj == WATER:
-                vj = fl.m[j] / fl.rhof(j)
-                pn += vj * fl.p[j] * wij
-                pd += vj * wij
-            else:
-                pdw += fl.vol0 * wij
-        pore = 0.0
-        if pd > 0.0:
-            pore = pn / pd
-        self.pore[i] = pore
-        fl.p[i] = pore
-        # wetness: the water's share of the support not taken by walls (1 in saturated soil beside a wall,
-        # whose wall particles take part of the kernel support)
-        self.phi_w[i] = ti.min(pd / ti.max(1.0 - pdw, 0.5), 1.0)
-
-    @ti.func
     def passes(self, dt):
         """The soil's passes after the solver's pair loop, each a loop of the same kernel: forces, then the
         drag (coupled scenes); returns their reductions (`nred`: the force pass's, then the drag's)."""
@@ -234,8 +192,13 @@ class SoilPasses:
 
     @ti.func
     def _forces_pass(self, dt):
-        """Pore pressure and water presence (`_pore_at`), then eq 35 with eq 36, gravity, pore-pressure
-        force, damping; reductions: kinetic energy, max speed, min h/|a|, min h/c, non-finite count, first
+        """One walk over each soil particle's neighbours for the pore pressure, the water presence and the
+        forces: p_i = sum_w V_j p_j W_ij / sum_w V_j W_ij from the water's new pressure (eq 5,
+        Shepard-normalised), the wetness phi_w, then eq 35 with eq 36, gravity, the pore-pressure force,
+        damping. The terms that need p_i or phi_w are summed without them and combined after the walk:
+        sum_w V_j (p_j - p_i) grad W = sum_w V_j (p_j - p0) grad W - (p_i - p0) sum_w V_j grad W, with p0 the
+        particle's pore pressure of the step before (so that the sums hold differences, not the pressure
+        itself, in f32). Reductions: kinetic energy, max speed, min h/|a|, min h/c, non-finite count, first
         bad id (returned)."""
         fl = self.fl
         ke = 0.0
@@ -249,8 +212,6 @@ class SoilPasses:
         for m in range(fl.n_moving[None]):  # the moving particles (fluid and soil), solver.moving_ids
             i = fl.moving_ids[m]
             if fl.fmask[i] == 2:
-                if ti.static(fl.coupled):
-                    self._pore_at(i)
                 si = fl.s[i]
                 xi = fl._pos(si)
                 vi = fl._vel(si)
@@ -259,28 +220,43 @@ class SoilPasses:
                 si_r = sigi / (rhoi * rhoi)
                 p_i, _s, _t = soil.mean_and_shear(sigi, fl.dim)
                 ci = ti.sqrt(self.m_fac * soil.youngs_modulus(p_i, self.e0, self.p_ref, self.m_exp, self.p_floor) / rhoi)
-                pore_i = self.pore[i]
+                p0 = self.pore[i]
                 acc = fl.g
-                gradp = ti.Vector.zero(float, fl.dim)
                 # stress acceleration; the walls carry the stress and the pore pressure across their faces
                 # by the equilibrium gradient and along them by the gradient at i (walls.wall_mirror_solve):
                 # m_wall = sum V grad W (x) d_t and g_t = sum V (g . d_t) grad W over the walls serve both
                 accs = ti.Vector.zero(float, fl.dim)
                 m_wall = ti.Matrix.zero(float, fl.dim, fl.dim)
                 g_t = ti.Vector.zero(float, fl.dim)
-                b_fac = 1.0  # the buoyant share of the soil's weight, (1 - phi_w rho_w / rho_s)
-                if ti.static(fl.coupled):
-                    b_fac = 1.0 - self.phi_w[i] * fl.rho_w / self.rho_g
+                g_n = ti.Vector.zero(float, fl.dim)  # sum over the walls of V (g . d_n) grad W
+                gp_w = ti.Vector.zero(float, fl.dim)  # sum_w V_j (p_j - p0) grad W
+                gv_w = ti.Vector.zero(float, fl.dim)  # sum_w V_j grad W
+                pn = 0.0  # sum_w V_j (p_j - p0) W
+                pd = 0.0  # sum_w V_j W
+                pdw = 0.0  # the walls' share of the support
                 for k in range(fl.grid.nbr_count[i]):
                     j = fl.grid.nbr[i, k]
                     sj = fl.s[j]
                     rij = operators.rel(xi, fl._pos(sj), fl.period)
                     r2 = rij.dot(rij)
-                    if r2 >= 4.0 * h * h or r2 == 0.0:
+                    if r2 >= 4.0 * h * h:
                         continue
                     r = ti.sqrt(r2)
-                    gw = kernels.dw_dr(r, h, fl.dim) / r * rij
                     kj = sj[fl.S_KIND]
+                    vj = 0.0
+                    dpj = 0.0
+                    if ti.static(fl.coupled):
+                        if kj == WATER:  # the pore pressure and wetness take the water at i's own place too
+                            vj = sj[fl.S_M] / fl.rhof(j)
+                            dpj = fl.p[j] - p0
+                            wij = vj * kernels.w(r, h, fl.dim)
+                            pn += dpj * wij
+                            pd += wij
+                        elif kj == WALL:
+                            pdw += fl.vol0 * kernels.w(r, h, fl.dim)
+                    if r2 == 0.0:
+                        continue
+                    gw = kernels.dw_dr(r, h, fl.dim) / r * rij
                     if kj == SOIL:
                         mj = sj[fl.S_M]
                         rhoj = fl.rhof(j)
@@ -295,14 +271,12 @@ class SoilPasses:
                         xw = xi - rij  # the wall particle's nearest image
                         db = fl.wdepth[j]
                         nrm = fl.normal[j]
-                        # (its equilibrium gradient: the buoyant unit weight b_fac rho g where water fills
-                        # the pores, whose pressure the pore term below extrapolates)
                         dxw = xw - xi
                         dxn = dxw.dot(nrm) * nrm
-                        dsig = b_fac * rhoi * fl.g.dot(dxn)
                         mw = rhoi * fl.vol0
                         m_wall += fl.vol0 * gw.outer_product(dxw - dxn)
                         g_t += fl.vol0 * fl.g.dot(dxw - dxn) * gw
+                        g_n += fl.vol0 * fl.g.dot(dxn) * gw
                         sw_r = si_r
                         if ti.static(not fl.no_slip):
                             # a slip wall carries no shear traction: the mirror image of the stress across
@@ -310,22 +284,39 @@ class SoilPasses:
                             # the opposite sign (the pair sum cancels it); no-slip walls carry sigma itself
                             refl = ti.Matrix.identity(float, fl.dim) - 2.0 * nrm.outer_product(nrm)
                             sw_r = refl @ si_r @ refl
-                        accs -= mw * (si_r + sw_r + dsig / (rhoi * rhoi) * ti.Matrix.identity(float, fl.dim)) @ gw
+                        accs -= mw * (si_r + sw_r) @ gw
                         beta = walls.boundary_beta(db, rij.dot(nrm) - db, fl.beta_max)
                         vij = walls.boundary_relative_velocity(vi - fl.v[j], nrm, beta, fl.no_slip)
                         pij = terms.artificial_viscosity(vij, rij, r2, h, ci, rhoi, self.alpha_s, 0.0, fl.av_eps)
                         acc -= mw * pij * gw
-                        if ti.static(fl.coupled):
-                            # pore pressure at the wall particle: hydrostatic across the wall (no flow
-                            # through it), the gradient at i along it (the mirror image of the excess
-                            # pressure): p_w - p_i = rho_w g . dx_n + G_i . dx_t, weighted by phi_w
-                            gradp += self.phi_w[i] * fl.vol0 * fl.rho_w * fl.g.dot(dxn) * gw
                     elif kj == WATER:  # noqa: SIM102 (compile-time if)
                         if ti.static(fl.coupled):
-                            gradp += sj[fl.S_M] / fl.rhof(j) * (fl.p[j] - pore_i) * gw
+                            gp_w += vj * dpj * gw
+                            gv_w += vj * gw
+                b_fac = 1.0  # the buoyant share of the soil's weight, (1 - phi_w rho_w / rho_s)
+                pw = 0.0
+                gradp = ti.Vector.zero(float, fl.dim)
+                if ti.static(fl.coupled):
+                    dp = -p0  # no water around: no pore pressure
+                    if pd > 0.0:
+                        dp = pn / pd
+                    pore_i = p0 + dp
+                    self.pore[i] = pore_i
+                    fl.p[i] = pore_i
+                    # wetness: the water's share of the support not taken by walls (1 in saturated soil
+                    # beside a wall, whose wall particles take part of the kernel support)
+                    pw = ti.min(pd / ti.max(1.0 - pdw, 0.5), 1.0)
+                    self.phi_w[i] = pw
+                    b_fac = 1.0 - pw * fl.rho_w / self.rho_g
+                    # the pore pressure at a wall particle: hydrostatic across the wall (no flow through
+                    # it), the gradient at i along it (the mirror image of the excess pressure): p_w - p_i
+                    # = rho_w g . dx_n + G_i . dx_t, weighted by phi_w
+                    gradp = gp_w - dp * gv_w + pw * fl.rho_w * g_n
+                # the walls' equilibrium gradient across their faces: the buoyant unit weight b_fac rho g
+                # where water fills the pores, whose pressure the pore term extrapolates
+                accs -= b_fac * g_n
                 acc += walls.wall_mirror_solve(accs, m_wall, -b_fac * g_t)
                 if ti.static(fl.coupled):  # G_i = gradp + phi_w m_wall G_i
-                    pw = self.phi_w[i]
                     acc -= walls.wall_mirror_solve(gradp, pw * m_wall, pw * fl.rho_w * g_t) / self.rho_g
                 acc -= self.damping * vi
                 if ti.static(self.soil_fixed):
@@ -387,9 +378,12 @@ class SoilPasses:
                 nsum = 0.0
                 abar = ti.Vector.zero(float, fl.dim)
                 wall = 0.0
-                for k in range(fl.grid.nbr_count[i]):
-                    j, kj, r2 = self._neighbour(i, k, xi)
-                    if (kj != SOIL and kj != WALL) or r2 >= 4.0 * h * h:
+                for k in range(fl.nbr_fluid(i)):  # soil and walls
+                    j = fl.grid.nbr[i, k]
+                    kj = fl.kind[j]
+                    rij = operators.rel(xi, fl.xf(j), fl.period)
+                    r2 = rij.dot(rij)
+                    if r2 >= 4.0 * h * h:
                         continue
                     if kj == WALL:
                         wall += fl.vol0 * kernels.w(ti.sqrt(r2), h, fl.dim)
@@ -411,7 +405,7 @@ class SoilPasses:
                 self.amix[i] = amix
 
     @ti.func
-    def _pair_drag(self, i, j, dt):
+    def _pair_drag(self, i, j, w_ij, dt):
         """Biot drag force (eq 46-47) on water particle i from soil particle j (N; N/m in 2D); soil j feels
         its opposite. F_ij = -m_i n_i (g / k) f_i V_j W_ij q_ij with f_i = phi_s / sum_soil V_j W_ij (so
         that summed over j it is the water's -m_i n_i phi_s (g / k) (u_i - v_bar), and the soil's sum over i
@@ -419,23 +413,29 @@ class SoilPasses:
         n there). q_ij is the pair's relative velocity after the kick, implicit: q*_ij / (1 + dt lambda_ij),
         q*_ij = (u_i + dt A_i) - (v_j + dt a_j), lambda_ij = n_i (phi_s,i g / k + C_s,j phi_w,j) (the rate
         at which the drag closes u - v_s; C_s,j = 0 for a held skeleton). Both sides evaluate this
-        function with the same (water, soil) arguments, so F_ij = -F_ji to rounding."""
+        function with the same (water, soil) arguments, so F_ij = -F_ji to rounding. w_ij is V_j W_ij (zero
+        beyond the support: no force), which the caller has at hand (`_soil_weight`)."""
         fl = self.fl
-        f = ti.Vector.zero(float, fl.dim)
-        rij = operators.rel(fl.xf(i), fl.xf(j), fl.period)
+        wm = self.wmix[i]
+        rhoj = fl.rhof(j)
+        cs = 0.0
+        if self._movable(j):
+            cs = (1.0 - rhoj / self.rho_g) * fl.rho_w / rhoj * self.g_over_k * self.phi_w[j]
+        lam = wm[0] * (wm[2] * self.g_over_k + cs)
+        c = fl.m[i] * wm[0] * self.g_over_k * wm[1] * w_ij
+        qs = (fl.v[i] + dt * self.amix[i]) - (fl.v[j] + dt * fl.a[j])
+        return -c / (1.0 + dt * lam) * qs
+
+    @ti.func
+    def _soil_weight(self, xi, j):
+        """V_j W_ij of soil particle j seen from x_i (m_j / rho_j times the kernel; 0 beyond the support)."""
+        fl = self.fl
+        rij = operators.rel(xi, fl.xf(j), fl.period)
         r2 = rij.dot(rij)
+        w = 0.0
         if r2 < 4.0 * fl.h0 * fl.h0:
-            wm = self.wmix[i]
-            rhoj = fl.rhof(j)
-            cs = 0.0
-            if self._movable(j):
-                cs = (1.0 - rhoj / self.rho_g) * fl.rho_w / rhoj * self.g_over_k * self.phi_w[j]
-            lam = wm[0] * (wm[2] * self.g_over_k + cs)
-            c = fl.m[i] * wm[0] * self.g_over_k * wm[1] * kernels.w(ti.sqrt(r2), fl.h0, fl.dim) * (
-                fl.m[j] / rhoj)
-            qs = (fl.v[i] + dt * self.amix[i]) - (fl.v[j] + dt * fl.a[j])
-            f = -c / (1.0 + dt * lam) * qs
-        return f
+            w = kernels.w(ti.sqrt(r2), fl.h0, fl.dim) * fl.m[j] / fl.rhof(j)
+        return w
 
     @ti.func
     def _drag_soil_pass(self, dt):
@@ -448,10 +448,12 @@ class SoilPasses:
             i = fl.moving_ids[m]
             if fl.fmask[i] == 2:
                 fsum = ti.Vector.zero(float, fl.dim)
-                for k in range(fl.grid.nbr_count[i]):
+                for k in range(fl.nbr_fluid(i), fl.grid.nbr_count[i]):  # water and air
                     j = fl.grid.nbr[i, k]
-                    if fl.kind[j] == WATER and fl.fmask[j] == 1:
-                        fsum -= self._pair_drag(j, i, dt)
+                    if fl.kind[j] == WATER:
+                        w = self._soil_weight(fl.xf(j), i)
+                        if w > 0.0:
+                            fsum -= self._pair_drag(j, i, w, dt)
                 if not self._movable(i):
                     fsum = ti.Vector.zero(float, fl.dim)
                 self.fdrag[i] = fsum
@@ -464,7 +466,6 @@ class SoilPasses:
         Also the momentum check: the sum over all particles of the drag forces `fdrag` (the soil's from
         `_drag_soil_pass`) and the largest of them (returned)."""
         fl = self.fl
-        h = fl.h0
         tot = ti.Vector.zero(float, fl.dim)
         big = 0.0
         ti.loop_config(serialize=fl.serial)
@@ -478,15 +479,12 @@ class SoilPasses:
                 fsum = ti.Vector.zero(float, fl.dim)
                 wsum = 0.0
                 dbar = ti.Vector.zero(float, fl.dim)
-                for k in range(fl.grid.nbr_count[i]):
+                xi = fl.xf(i)
+                for k in range(fl.nbr_walls(i)):  # soil
                     j = fl.grid.nbr[i, k]
-                    if fl.kind[j] != SOIL or fl.fmask[j] != 2:
-                        continue
-                    fsum += self._pair_drag(i, j, dt)
-                    rij = operators.rel(fl.xf(i), fl.xf(j), fl.period)
-                    r2 = rij.dot(rij)
-                    if r2 < 4.0 * h * h:
-                        wij = kernels.w(ti.sqrt(r2), h, fl.dim) * fl.m[j] / fl.rhof(j)
+                    wij = self._soil_weight(xi, j)
+                    if wij > 0.0:
+                        fsum += self._pair_drag(i, j, wij, dt)
                         wsum += wij
                         dbar += wij * self.adrag[j]
                 ad = self.adrag[i] + fsum / fl.m[i]

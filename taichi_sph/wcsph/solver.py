@@ -206,6 +206,7 @@ class WCSPHSolver(SolverCommon):
         # particles (3D slice at 200k water: 1.0 CPU s per wall s on two threads)
         self.moving_ids = ti.field(ti.i32, n)
         self.n_moving = ti.field(ti.i32, ())
+        self.group = ti.field(ti.i32, n if self.has_soil else 1)  # the list order of a neighbour (_k_mask)
         self.particle_fields = [self.x, self.v, self.a, self.xs, self.rate, self.normal, self.rho, self.p,
                                 self.h, self.m, self.wdepth, self.kind, self.ids, self.active]
         # soil state and passes (soil_step.py); its fields are one element long in a scene without soil
@@ -251,7 +252,11 @@ class WCSPHSolver(SolverCommon):
             if "plastic_strain" in init:  # two-stage run (stage.py)
                 self.soil.eps_p.from_numpy(init["plastic_strain"].astype(f))
 
-        self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.cell, self.max_nb, period=self.period)
+        # with soil, each list holds the soil neighbours first, then the walls, then the fluid (`group`,
+        # grid.group_rows): the fluid's pair pass walks walls and fluid, the soil's stress soil and walls, the
+        # drag passes the other set, each its own range of the list
+        self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.cell, self.max_nb, period=self.period,
+                                  grouped=self.has_soil)
         self.wall_pressure = walls.WallPressure(self, n)
         self.r_list = 0.0  # list radius at the last build
         self.hmax = self.h0
@@ -334,6 +339,22 @@ class WCSPHSolver(SolverCommon):
         return ti.cast(self.rho[i], float)
 
     @ti.func
+    def nbr_walls(self, i):
+        """Where the wall neighbours start in i's list (soil first, then walls, then fluid; 0 without soil)."""
+        k = 0
+        if ti.static(self.has_soil):
+            k = self.grid.nbr_split[i][0]
+        return k
+
+    @ti.func
+    def nbr_fluid(self, i):
+        """Where the fluid neighbours (water, air) start in i's list (after the soil and the walls)."""
+        k = 0
+        if ti.static(self.has_soil):
+            k = self.grid.nbr_split[i][1]
+        return k
+
+    @ti.func
     def _pos(self, sj):
         return ti.Vector([sj[d] for d in ti.static(range(self.dim))])
 
@@ -388,9 +409,11 @@ class WCSPHSolver(SolverCommon):
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             self.fmask[i] = 1 if (self.active[i] == 1 and self.kind[i] != WALL) else 0
-            if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if)
+            if ti.static(self.has_soil):
                 if self.active[i] == 1 and self.kind[i] == SOIL:
                     self.fmask[i] = 2  # soil: moved by kick-drift, its own passes (soil_step.py)
+                # neighbour-list order: soil, walls, fluid (water and air)
+                self.group[i] = 0 if self.kind[i] == SOIL else (1 if self.kind[i] == WALL else 2)
 
     @ti.kernel
     def _k_moving_list(self):
@@ -473,7 +496,7 @@ class WCSPHSolver(SolverCommon):
                 num = si[self.S_M] * w0
                 den = si[self.S_M] / rhoi * w0
                 c2i = self._sound_speed(ki, rhoi) ** 2
-                for k in range(self.grid.nbr_count[i]):
+                for k in range(self.nbr_walls(i), self.grid.nbr_count[i]):
                     j = self.grid.nbr[i, k]
                     sj = self.s[j]
                     kj = sj[self.S_KIND]
@@ -586,12 +609,9 @@ class WCSPHSolver(SolverCommon):
                 accp = ti.Vector.zero(float, self.dim)
                 m_wall = ti.Matrix.zero(float, self.dim, self.dim)
                 hyd_t = ti.Vector.zero(float, self.dim)
-                for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
+                for k in range(self.nbr_walls(i), self.grid.nbr_count[i]):  # walls and fluid: soil couples by
+                    j = self.grid.nbr[i, k]  # drag only
                     sj = self.s[j]
-                    if ti.static(self.has_soil):  # noqa: SIM102 (compile-time if); soil couples by drag only
-                        if sj[self.S_KIND] == SOIL:
-                            continue
                     qj = self.q[j]
                     hij = self.h0
                     if ti.static(self.variable_h):
@@ -713,6 +733,8 @@ class WCSPHSolver(SolverCommon):
                                             in_place=reorder)
         except NeighbourOverflowError as exc:
             raise guard.neighbour_overflow_error(self.step_count, self.time, exc) from None
+        if self.has_soil:
+            self.grid.group_rows(self.group, self.n)
         self._k_after_build(dt, w[0], w[1])
         self.rebuilds += 1
 
@@ -790,7 +812,6 @@ class WCSPHSolver(SolverCommon):
     # ------------------------------------------------------------------ output
     def fields_by_id(self) -> dict:
         """Per-particle arrays in id order (SPEC 8 frame fields); pressures relative to the ambient."""
-        n = self.n
         self.wall_pressure.update()
         order = self._id_order()
         kind = self.kind.to_numpy()[order]
@@ -852,6 +873,9 @@ class WCSPHSolver(SolverCommon):
         restore(self.soil, {k: v for k, v in state.items() if k in soil_keys}, self.soil.state_fields,
                 self.soil.state_scalars)
         self._k_moving_list()  # a function of fmask, which the state holds
+        if self.has_soil:  # the lists' order by group (a state from before it was kept, too)
+            self._k_mask()
+            self.grid.group_rows(self.group, self.n)
 
 
 def prediction_weights(dt: float, dt_prev: float, dt_prev2: float, known: int) -> tuple[float, float]:
