@@ -14,7 +14,10 @@ the cells).
 
 `sort()` only computes `perm`; `reorder()` applies it to any per-particle field. After sorting and
 reordering positions, `build_neighbour_lists()` writes an explicit neighbour list per particle by
-scanning the 3^dim cells around it.
+scanning the 3^dim cells around it. A grid made with `grouped=True` can then order each list by a
+per-particle group 0, 1, 2 (`group_rows`, stable within a group) and keeps where groups 1 and 2 start
+(`nbr_split`): mode wcsph_biot lists soil, walls, fluid, so that a pass over one set skips the others
+without reading them.
 
 Periodic axes (`period`, the period L of each axis, 0 where the axis is not periodic) span [0, L)
 whatever `lo` and `hi` say: their cell count is floor(L / cell_size), so a cell is at least the
