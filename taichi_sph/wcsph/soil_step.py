@@ -378,7 +378,9 @@ class SoilPasses:
                 nsum = 0.0
                 abar = ti.Vector.zero(float, fl.dim)
                 wall = 0.0
-                for k in range(fl.nbr_fluid(i)):  # soil and walls
+                # soil and walls; the walls' share counts only with soil around (none: free water)
+                n_sw = fl.nbr_fluid(i) if fl.nbr_walls(i) > 0 else 0
+                for k in range(n_sw):
                     j = fl.grid.nbr[i, k]
                     kj = fl.kind[j]
                     rij = operators.rel(xi, fl.xf(j), fl.period)
