@@ -14,14 +14,22 @@ def _cache_dir() -> str:
     return str(Path(base) / "ticache")
 
 
+def resolved_precision(precision: str, gpu: bool, mode: str | None) -> str:
+    """The precision a run takes: `precision` itself unless it is 'auto', which means f32 on GPUs and in
+    mode wcsph_biot, whose position, density and smoothing length stay f64 at either precision
+    (docs/performance_wcsph.md, "Precision": f32 holds f64's accuracy on the hydrostatic tank, the dam
+    break, Terzaghi and Dupuit, and is faster), and f64 for mode isph on the CPU, whose fields are all of
+    the run's precision."""
+    if precision != "auto":
+        return precision
+    return "f32" if gpu or mode == "wcsph_biot" else "f64"
+
+
 def auto_precision(arch, mode: str | None) -> str:
-    """What `precision: auto` means: f32 on GPUs and in mode wcsph_biot, whose position, density and
-    smoothing length stay f64 at either precision (docs/performance_wcsph.md, "Precision": f32 holds f64's
-    accuracy on the hydrostatic tank, the dam break, Terzaghi and Dupuit, and is faster); f64 for mode
-    isph on the CPU, whose fields are all of the run's precision."""
+    """What `precision: auto` means on Taichi backend `arch` (`resolved_precision`)."""
     import taichi as ti
 
-    return "f64" if arch == ti.cpu and mode != "wcsph_biot" else "f32"
+    return resolved_precision("auto", arch != ti.cpu, mode)
 
 
 def init(arch: str = "cpu", precision: str = "auto", threads: int | None = None, debug: bool = False,

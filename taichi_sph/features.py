@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 
+from .backend import resolved_precision
 from .switches import Switches
 
 #: Taichi prints its banner on stdout when first imported unless this variable says 0
@@ -45,6 +46,10 @@ def features(cfg, scene=None) -> dict:
             "obstacles": len(cfg.obstacles),
             "gravity": cfg.gravity_vector(),
         },
+        # what `precision` resolves to on the CPU and on a GPU (`arch: auto` takes a GPU where there is one)
+        "precision": {"setting": cfg.precision, "arch": cfg.arch,
+                      "cpu": resolved_precision(cfg.precision, False, cfg.mode),
+                      "gpu": resolved_precision(cfg.precision, True, cfg.mode)},
         "output": {"path": cfg.output.path, "every": cfg.output.every},
         "probes": {p.name: {"type": p.type, "every": p.every or cfg.output.every} for p in cfg.probes},
         "images": (None if cfg.output.images is None else

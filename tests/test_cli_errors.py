@@ -313,6 +313,8 @@ def test_info_config_json(run_cli, tmp_path):
     assert data["mode"] == "isph"
     assert data["dim"] == 2
     assert data["dx"] == pytest.approx(0.01)
+    # mode isph: f64 on the CPU, f32 on a GPU unless the config says
+    assert data["precision"] == {"setting": "auto", "arch": "cpu", "cpu": "f64", "gpu": "f32"}
     assert "[Taichi]" not in proc.stdout + proc.stderr
 
 
@@ -323,6 +325,14 @@ def test_info_config_json_with_override(run_cli):
     data = json.loads(proc.stdout)
     assert data["dx"] == pytest.approx(0.02)
     assert data["isph"]["alpha"] == 0
+
+
+def test_info_config_shows_the_precision_a_run_takes(run_cli):
+    proc = run_cli("info", "--config", HYDROSTATIC, "--set", "mode=wcsph_biot", "--json", timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["precision"] == {"setting": "auto", "arch": "cpu", "cpu": "f32", "gpu": "f32"}
+    proc = run_cli("info", "--config", HYDROSTATIC, "--set", "precision=f32", "--json", timeout=120)
+    assert json.loads(proc.stdout)["precision"]["cpu"] == "f32"
 
 
 def test_info_config_bad_override_exits_2(run_cli):
