@@ -336,3 +336,39 @@ def test_soft_pore_water_warns_and_is_recorded(run_cli, tmp_path):
                  "--no-progress")
     assert r3.returncode == 0, r3.stderr
     assert "wcsph.water.sound_speed" in r3.stderr, r3.stderr
+
+
+def test_dealt_moving_list_leaves_every_particle_as_it_was(ti_cpu, monkeypatch):
+    """A parallel scene with soil deals its list of moving particles to the threads in chunks
+    (solver.DEAL_CHUNK, `_k_moving_list`), so that each thread's block of every loop samples the whole scene.
+    The list must stay a permutation of the moving particles, and the particles' states must not depend on
+    it: each particle's update reads only its neighbours, the loop order changes sums of diagnostics only.
+    configs/consolidation.yaml (433 particles, soil + water) run 60 steps with its loops parallel, the list
+    in cell order and dealt to 2 threads: positions, velocities and stresses equal bit for bit."""
+    import taichi_sph.wcsph.solver as sv
+    from taichi_sph.run import TimeStepper
+    from taichi_sph.scene import build_scene
+    from taichi_sph.solvers import make_solver
+
+    cfg = load_config("configs/consolidation.yaml", ["precision=f64"])
+    monkeypatch.setattr(sv, "SERIAL_BELOW_SOIL", 0)
+    out = {}
+    for deal in (1, 2):
+        monkeypatch.setattr(sv, "deal_threads", lambda has_soil, serial, d=deal: d)
+        solver = make_solver(cfg, build_scene(cfg))
+        assert not solver.serial and solver.deal == deal
+        solver.initial_diagnostics()
+        n = solver.n_moving[None]
+        ids = solver.moving_ids.to_numpy()[:n]
+        moving = np.nonzero(solver.fmask.to_numpy()[: solver.n] >= 1)[0]
+        np.testing.assert_array_equal(np.sort(ids), moving)
+        if deal == 2:  # dealt: not the cell order any more
+            assert np.any(np.diff(ids) < 0)
+        stepper = TimeStepper(cfg, solver.g_abs)
+        for _ in range(60):
+            solver.step(stepper.choose(0.0, solver.propose_dt())[0])
+        f = solver.fields_by_id()
+        out[deal] = (f, solver.soil.sig.to_numpy()[solver._id_order()])
+    for key in ("position", "velocity"):
+        np.testing.assert_array_equal(out[1][0][key], out[2][0][key])
+    np.testing.assert_array_equal(out[1][1], out[2][1])

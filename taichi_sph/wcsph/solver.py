@@ -46,7 +46,7 @@ from ..backend import is_f64
 from ..contract import DT_CFL, DT_FORCE, DT_VISCOUS
 from ..scene import AIR, SOIL, WALL, WATER
 from ..sph import kernels, operators, walls
-from ..sph.grid import NeighbourGrid, NeighbourOverflowError
+from ..sph.grid import NeighbourGrid, NeighbourOverflowError, _is_cpu_arch
 from ..sph.solver_common import SolverCommon
 from ..sph.wall_motion import WallMotion
 from ..switches import Switches
@@ -73,6 +73,10 @@ SERIAL_BELOW = 2000
 #: (2686 moving particles) 1.78-1.91 / 1.95-2.03, its dry variant (2517) 1.20-1.26 / 1.33-1.43; at
 #: dx 8.5 mm (3767) 2.39-2.42 / 2.34-2.41; at dx 7 mm (5411) 3.50-3.55 / 2.88-2.89
 SERIAL_BELOW_SOIL = 4000
+#: particles per chunk when the moving list of a parallel scene with soil is dealt to the threads (16, hashed
+#: to threads: levee at dx 4 mm 4.98 against 6.5-7.2 ms per step in cell order; chunks of 64 resonated
+#: with the scene's rows)
+DEAL_CHUNK = 16
 
 
 @ti.data_oriented
@@ -202,10 +206,18 @@ class WCSPHSolver(SolverCommon):
         self.fmask = ti.field(ti.i32, n)
         # the particles the pair pass walks (fmask >= 1: fluid and soil), in index (cell) order, rebuilt with
         # the lists (_k_moving_list): Taichi's CPU backend splits a parallel loop's range into one contiguous
-        # block per thread, so a loop over all n particles gave one thread the water and the other the wall
-        # particles (3D slice at 200k water: 1.0 CPU s per wall s on two threads)
+        # block per thread (whatever block_dim says), so a loop over all n particles gave one thread the water
+        # and the other the wall particles (3D slice at 200k water: 1.0 CPU s per wall s on two threads)
         self.moving_ids = ti.field(ti.i32, n)
         self.n_moving = ti.field(ti.i32, ())
+        # with soil and parallel loops, the list is dealt to the threads in chunks of DEAL_CHUNK particles
+        # (`_k_moving_list`, `deal_threads`): each pass works on another part of the scene (the fluid pass on
+        # all of it, the force pass on the soil, the drag passes on the water in the soil), and a contiguous
+        # block per thread gave one thread the levee and the other the river (levee at dx 4 mm, 16.8k
+        # moving particles: 1.25 CPU s per wall s, 1.32x the serial speed; dealt 1.77,
+        # docs/performance_wcsph.md)
+        self.deal = deal_threads(self.has_soil, self.serial)
+        self.moving_tmp = ti.field(ti.i32, n if self.deal > 1 else 1)
         self.group = ti.field(ti.i32, n if self.has_soil else 1)  # the list order of a neighbour (_k_mask)
         self.particle_fields = [self.x, self.v, self.a, self.xs, self.rate, self.normal, self.rho, self.p,
                                 self.h, self.m, self.wdepth, self.kind, self.ids, self.active]
@@ -417,7 +429,9 @@ class WCSPHSolver(SolverCommon):
 
     @ti.kernel
     def _k_moving_list(self):
-        """The indices of the moving particles (fmask >= 1), in index order, into moving_ids[:n_moving]."""
+        """The indices of the moving particles (fmask >= 1), in index order, into moving_ids[:n_moving]; with
+        `deal` threads, the chunks of DEAL_CHUNK of that order dealt round robin, thread t's chunks forming
+        the t-th contiguous block of the list (the block Taichi's CPU backend gives that thread)."""
         self.n_moving[None] = 0
         ti.loop_config(serialize=True)
         for i in range(self.n):
@@ -425,6 +439,23 @@ class WCSPHSolver(SolverCommon):
                 k = self.n_moving[None]
                 self.moving_ids[k] = i
                 self.n_moving[None] = k + 1
+        if ti.static(self.deal > 1):
+            nm = self.n_moving[None]
+            nch = (nm + DEAL_CHUNK - 1) // DEAL_CHUNK
+            ti.loop_config(serialize=True)
+            for k in range(nm):
+                self.moving_tmp[k] = self.moving_ids[k]
+            pos = 0
+            ti.loop_config(serialize=True)
+            for t in range(self.deal):
+                for c in range(nch):
+                    # the thread of chunk c by a multiplicative hash, not c % deal: round robin resonated
+                    # with the scene's row structure (levee at dx 5 mm: one thread still got most work)
+                    hc = (ti.cast(c, ti.u32) * ti.u32(2654435761)) >> ti.u32(16)
+                    if ti.cast(hc % ti.u32(self.deal), ti.i32) == t:
+                        for k in range(c * DEAL_CHUNK, ti.min(nm, (c + 1) * DEAL_CHUNK)):
+                            self.moving_ids[pos] = self.moving_tmp[k]
+                            pos += 1
 
     @ti.kernel
     def _k_after_build(self, dt: float, w1: float, w2: float):
@@ -876,6 +907,15 @@ class WCSPHSolver(SolverCommon):
         if self.has_soil:  # the lists' order by group (a state from before it was kept, too)
             self._k_mask()
             self.grid.group_rows(self.group, self.n)
+
+
+def deal_threads(has_soil: bool, serial: bool) -> int:
+    """How many threads the moving list is dealt to (`_k_moving_list`): the CPU's threads in a parallel
+    scene with soil, else 1 (the list stays in cell order)."""
+    cfg = ti.lang.impl.current_cfg()
+    if has_soil and not serial and _is_cpu_arch(cfg.arch):
+        return max(1, int(cfg.cpu_max_num_threads))
+    return 1
 
 
 def prediction_weights(dt: float, dt_prev: float, dt_prev2: float, known: int) -> tuple[float, float]:
