@@ -7,7 +7,8 @@ Cases (`--case`, default all):
   `--saturated` (default none: the shipped config's stage 2, soil + water, a piston raising the river);
 - levee_dry: the same config, variant `--dry` (the shipped one: soil + a river against the dry levee, no
   air; the earlier configs' `dry` variant held air in the levee's pores);
-- dambreak3d_200k (on request): the dam break's 3d variant (a slice 0.2 m deep) at 200k water particles.
+- dambreak3d_200k (on request): the dam break's 3d variant (a slice 0.2 m deep) at 200k water particles;
+- levee_fine (on request): the saturated levee case at dx 4 mm, whose loops run in parallel.
 The levee cases start from their K0 state (`wcsph.soil.start_from` cleared: the saturated stage otherwise
 needs a stage-1 run file; the particles and passes are the same). Each case lets the flow start (warm-up,
 JIT compilation excluded), then times `--steps` steps with the time step of eq 49 in ten chunks and
@@ -80,6 +81,15 @@ def case_table(args) -> dict:
             args.dry,
             ["wcsph.soil.start_from=null"],
             f"dry levee ({Path(levee).name} variant {args.dry})",
+        ),
+        # the same levee at dx 4 mm (16.8k moving particles in the shipped config): large enough that its
+        # loops run in parallel (solver.SERIAL_BELOW_SOIL), so the threads' balance counts
+        "levee_fine": (
+            levee,
+            args.saturated or None,
+            ["wcsph.soil.start_from=null", "dx=0.004"],
+            f"levee at dx 4 mm, soil + water ({Path(levee).name} "
+            f"{('variant ' + args.saturated) if args.saturated else 'stage 2'})",
         ),
     }
 
@@ -389,7 +399,7 @@ def main():
         "--case",
         nargs="+",
         default=["dambreak_20k", "dambreak_80k", "levee_saturated", "levee_dry"],
-        choices=["dambreak_20k", "dambreak_80k", "dambreak3d_200k", "levee_saturated", "levee_dry"],
+        choices=["dambreak_20k", "dambreak_80k", "dambreak3d_200k", "levee_saturated", "levee_dry", "levee_fine"],
     )
     ap.add_argument(
         "--levee", default=str(ROOT / "configs" / "embankment.yaml"), help="config of the levee cases"

@@ -430,8 +430,9 @@ class WCSPHSolver(SolverCommon):
     @ti.kernel
     def _k_moving_list(self):
         """The indices of the moving particles (fmask >= 1), in index order, into moving_ids[:n_moving]; with
-        `deal` threads, the chunks of DEAL_CHUNK of that order dealt round robin, thread t's chunks forming
-        the t-th contiguous block of the list (the block Taichi's CPU backend gives that thread)."""
+        `deal` threads, the chunks of DEAL_CHUNK of that order dealt to the threads by a hash of the chunk's
+        index, thread t's chunks forming the t-th block of the list (about the block Taichi's CPU backend
+        gives that thread)."""
         self.n_moving[None] = 0
         ti.loop_config(serialize=True)
         for i in range(self.n):
@@ -640,8 +641,9 @@ class WCSPHSolver(SolverCommon):
                 accp = ti.Vector.zero(float, self.dim)
                 m_wall = ti.Matrix.zero(float, self.dim, self.dim)
                 hyd_t = ti.Vector.zero(float, self.dim)
-                for k in range(self.nbr_walls(i), self.grid.nbr_count[i]):  # walls and fluid: soil couples by
-                    j = self.grid.nbr[i, k]  # drag only
+                # walls and fluid: soil couples by drag only (soil_step.py)
+                for k in range(self.nbr_walls(i), self.grid.nbr_count[i]):
+                    j = self.grid.nbr[i, k]
                     sj = self.s[j]
                     qj = self.q[j]
                     hij = self.h0
