@@ -122,8 +122,9 @@ def test_neighbour_lists_match_brute_force(ti_cpu, dim, n):
 
 
 def test_grouped_lists_order_each_row_by_group(ti_cpu):
-    """A grouped grid's rows hold the same neighbours as the plain build, in group order 0, 1, 2 (each group
-    in the build's ascending order), and nbr_split gives where groups 1 and 2 start."""
+    """A grouped grid's lists hold the same neighbours as the plain build, in group order 0, 1, 2 (each group
+    in the plain list's order), and nbr_split gives where groups 1 and 2 start. group_rows (a checkpoint's
+    restore) keeps grouped lists as they are and puts a list saved ungrouped in group order."""
     dim, n = 2, 3000
     capacity = n + 11
     lo, hi, pos, active, mask = make_case(dim, n, capacity, seed=7)
@@ -133,14 +134,16 @@ def test_grouped_lists_order_each_row_by_group(ti_cpu):
     group.from_numpy(groups)
     plain = NeighbourGrid(capacity, dim, lo, hi, CELL, max_neighbours=400)
     grouped = NeighbourGrid(capacity, dim, lo, hi, CELL, max_neighbours=400, grouped=True)
-    for grid in (plain, grouped):
-        grid.sort(x, act, n)
-        grid.build_neighbour_lists(x, msk, n, RADIUS, in_place=False)
-    grouped.group_rows(group, n)
+    plain.sort(x, act, n)
+    plain.build_neighbour_lists(x, msk, n, RADIUS, in_place=False)
+    grouped.sort(x, act, n)
+    with pytest.raises(ValueError, match="group"):
+        grouped.build_neighbour_lists(x, msk, n, RADIUS, in_place=False)
+    grouped.build_neighbour_lists(x, msk, n, RADIUS, in_place=False, group=group)
     count = plain.nbr_count.to_numpy()[:n]
     np.testing.assert_array_equal(grouped.nbr_count.to_numpy()[:n], count)
-    before = plain.nbr.to_numpy()[:n]
-    after = grouped.nbr.to_numpy()[:n]
+    before = plain.nbr.to_numpy()
+    after = grouped.nbr.to_numpy()
     split = grouped.nbr_split.to_numpy()[:n]
     rows = np.nonzero(count > 0)[0]
     assert len(rows) > 1000
@@ -149,9 +152,20 @@ def test_grouped_lists_order_each_row_by_group(ti_cpu):
         expect = np.concatenate([row[groups[row] == g] for g in range(3)])
         np.testing.assert_array_equal(after[i, : count[i]], expect)
         assert tuple(split[i]) == (np.sum(groups[row] == 0), np.sum(groups[row] <= 1))
-    # grouping again leaves the rows as they are (a restored state is grouped once more)
+    # restore: grouped lists stay as they are, with their split
+    grouped.nbr_split.fill(-1)
     grouped.group_rows(group, n)
-    np.testing.assert_array_equal(grouped.nbr.to_numpy()[:n], after)
+    np.testing.assert_array_equal(grouped.nbr.to_numpy(), after)
+    np.testing.assert_array_equal(grouped.nbr_split.to_numpy()[:n], split)
+    # restore of lists saved ungrouped: the same sets, in group order, with their split
+    grouped.nbr.from_numpy(before)
+    grouped.group_rows(group, n)
+    regrouped = grouped.nbr.to_numpy()
+    np.testing.assert_array_equal(grouped.nbr_split.to_numpy()[:n], split)
+    for i in rows:
+        got = regrouped[i, : count[i]]
+        assert np.all(np.diff(groups[got]) >= 0)
+        np.testing.assert_array_equal(np.sort(got), np.sort(before[i, : count[i]]))
     with pytest.raises(RuntimeError, match="grouped=True"):
         plain.group_rows(group, n)
 

@@ -14,10 +14,11 @@ the cells).
 
 `sort()` only computes `perm`; `reorder()` applies it to any per-particle field. After sorting and
 reordering positions, `build_neighbour_lists()` writes an explicit neighbour list per particle by
-scanning the 3^dim cells around it. A grid made with `grouped=True` can then order each list by a
-per-particle group 0, 1, 2 (`group_rows`, stable within a group) and keeps where groups 1 and 2 start
-(`nbr_split`): mode wcsph_biot lists soil, walls, fluid, so that a pass over one set skips the others
-without reading them.
+scanning the 3^dim cells around it. A grid made with `grouped=True` builds each list ordered by a
+per-particle group 0, 1, 2 (the cells scanned once per group, each group in the plain list's order) and
+keeps where groups 1 and 2 start (`nbr_split`): mode wcsph_biot lists soil, walls, fluid, so that a pass
+over one set skips the others without reading them. `group_rows` sets `nbr_split` for lists restored
+from a checkpoint (and groups, in place, a list saved ungrouped).
 
 Periodic axes (`period`, the period L of each axis, 0 where the axis is not periodic) span [0, L)
 whatever `lo` and `hi` say: their cell count is floor(L / cell_size), so a cell is at least the
@@ -118,11 +119,11 @@ class NeighbourGrid:
         self._ovf_index = ti.field(ti.i32, ())
         self._scratch = {}
         self._sorted_n = None
-        #: `grouped`: `group_rows` orders each list by the neighbours' group (0, 1, 2) and keeps where groups
-        #: 1 and 2 start in `nbr_split[i]`, so that a pass that needs some groups walks only their range
+        #: `grouped`: each list is ordered by the neighbours' group (0, 1, 2), and `nbr_split[i]` keeps where
+        #: groups 1 and 2 start, so that a pass that needs some groups walks only their range
         self.grouped = bool(grouped)
         self.nbr_split = ti.Vector.field(2, ti.i32, self.capacity if grouped else 1)
-        self._row = ti.field(ti.i32, (self.capacity, self.max_neighbours) if grouped else (1, 1))
+        self._no_group = ti.field(ti.i32, 1)  # the group argument of an ungrouped build
 
     # ------------------------------------------------------------------ sort
     @ti.kernel
@@ -255,14 +256,17 @@ class NeighbourGrid:
     # ------------------------------------------------------- neighbour lists
     @ti.kernel
     def _build(self, x: ti.template(), mask: ti.template(), n: ti.i32, radius: float,
-               in_place: ti.template()) -> ti.i32:
+               in_place: ti.template(), group: ti.template()) -> ti.i32:
         """in_place: the particle arrays are in cell order (`reorder` applied); else particle perm[k] sits at
-        its own index and the cells are walked through perm."""
+        its own index and the cells are walked through perm. A grouped grid scans the cells once per group
+        of `group` and records where groups 1 and 2 start."""
         self._ovf_max[None] = 0
         r2max = radius * radius
         overflow = 0
         for i in range(n):
             cnt = 0
+            s0 = 0
+            s1 = 0
             c = self._cell_sorted[i]
             if ti.static(not in_place):
                 c = self._cell[i]
@@ -280,40 +284,51 @@ class NeighbourGrid:
                 zlo = ti.max(cc[last] - 1, 0)
                 zhi = ti.min(cc[last] + 1, ti.static(self.ncell[last] - 1))
                 xi = x[i]
-                for off in ti.static(ti.grouped(ti.ndrange(*([(-1, 2)] * (self.dim - 1))))):
-                    ok = 1
-                    lin = 0
-                    for d in ti.static(range(self.dim - 1)):
-                        nd = cc[d] + off[d]
-                        if ti.static(self.period[d] > 0.0):
-                            nd = (nd + ti.static(self.ncell[d])) % ti.static(self.ncell[d])
-                        if nd < 0 or nd >= ti.static(self.ncell[d]):
-                            ok = 0
-                        lin = lin * ti.static(self.ncell[d]) + nd
-                    if ok:
-                        lin = lin * ti.static(self.ncell[last])
-                        for zo in ti.static(range(1 if self.period[last] == 0.0 else 3)):
-                            a = lin + zlo
-                            b = lin + zhi + 1
-                            if ti.static(self.period[last] > 0.0):
-                                z = (cc[last] + zo - 1 + ti.static(self.ncell[last])) % ti.static(self.ncell[last])
-                                a = lin + z
-                                b = lin + z + 1
-                            for k in range(self.cell_start[a], self.cell_start[b]):
-                                j = k
-                                if ti.static(not in_place):
-                                    j = self.perm[k]
-                                if j != i:
-                                    dx = rel(xi, x[j], ti.static(self.period))
-                                    if dx.dot(dx) < r2max:
-                                        if cnt < ti.static(self.max_neighbours):
-                                            self.nbr[i, cnt] = j
-                                        cnt += 1
+                for g in ti.static(range(3 if self.grouped else 1)):  # one scan per group
+                    for off in ti.static(ti.grouped(ti.ndrange(*([(-1, 2)] * (self.dim - 1))))):
+                        ok = 1
+                        lin = 0
+                        for d in ti.static(range(self.dim - 1)):
+                            nd = cc[d] + off[d]
+                            if ti.static(self.period[d] > 0.0):
+                                nd = (nd + ti.static(self.ncell[d])) % ti.static(self.ncell[d])
+                            if nd < 0 or nd >= ti.static(self.ncell[d]):
+                                ok = 0
+                            lin = lin * ti.static(self.ncell[d]) + nd
+                        if ok:
+                            lin = lin * ti.static(self.ncell[last])
+                            for zo in ti.static(range(1 if self.period[last] == 0.0 else 3)):
+                                a = lin + zlo
+                                b = lin + zhi + 1
+                                if ti.static(self.period[last] > 0.0):
+                                    z = (cc[last] + zo - 1 + ti.static(self.ncell[last])) % ti.static(self.ncell[last])
+                                    a = lin + z
+                                    b = lin + z + 1
+                                for k in range(self.cell_start[a], self.cell_start[b]):
+                                    j = k
+                                    if ti.static(not in_place):
+                                        j = self.perm[k]
+                                    same = True
+                                    if ti.static(self.grouped):
+                                        same = group[j] == g
+                                    if j != i and same:
+                                        dx = rel(xi, x[j], ti.static(self.period))
+                                        if dx.dot(dx) < r2max:
+                                            if cnt < ti.static(self.max_neighbours):
+                                                self.nbr[i, cnt] = j
+                                            cnt += 1
+                    if ti.static(g == 0):
+                        s0 = cnt
+                    if ti.static(g == 1):
+                        s1 = cnt
             self._raw_count[i] = cnt
             if cnt > ti.static(self.max_neighbours):
                 overflow += 1
                 ti.atomic_max(self._ovf_max[None], cnt)
             self.nbr_count[i] = ti.min(cnt, ti.static(self.max_neighbours))
+            if ti.static(self.grouped):
+                self.nbr_split[i] = ti.Vector([ti.min(s0, ti.static(self.max_neighbours)),
+                                               ti.min(s1, ti.static(self.max_neighbours))])
         return overflow
 
     @ti.kernel
@@ -323,7 +338,8 @@ class NeighbourGrid:
             if self._raw_count[i] == self._ovf_max[None]:
                 ti.atomic_min(self._ovf_index[None], i)
 
-    def build_neighbour_lists(self, x, mask, n: int, radius: float, ids=None, in_place: bool = True):
+    def build_neighbour_lists(self, x, mask, n: int, radius: float, ids=None, in_place: bool = True,
+                              group=None):
         """Fill `nbr` / `nbr_count` for rows i < n with mask[i] != 0: all j != i with |x_i - x_j| < radius.
 
         Call after `sort()` and `reorder()` of `x` and `mask`; or, with `in_place=False`, after `sort()` alone
@@ -339,7 +355,9 @@ class NeighbourGrid:
             raise ValueError(f"build_neighbour_lists(n={n}) does not match the last sort(n={self._sorted_n})")
         if not 0.0 < radius <= self.cell_size:
             raise ValueError(f"radius {radius} must be positive and at most the cell size {self.cell_size}")
-        rows = self._build(x, mask, n, radius, bool(in_place))
+        if self.grouped and group is None:
+            raise ValueError("a grouped grid builds its lists with the particles' group (group=...)")
+        rows = self._build(x, mask, n, radius, bool(in_place), group if self.grouped else self._no_group)
         if rows > 0:
             self._find_overflow(n)
             index = int(self._ovf_index[None])
@@ -351,36 +369,44 @@ class NeighbourGrid:
     def _group_rows(self, group: ti.template(), n: ti.i32):
         for i in range(n):
             cnt = self.nbr_count[i]
+            grouped = True
+            for k in range(1, cnt):
+                if group[self.nbr[i, k]] < group[self.nbr[i, k - 1]]:
+                    grouped = False
+            if not grouped:
+                # a list saved ungrouped: three-way partition in place (not stable, but deterministic)
+                lo = 0
+                mid = 0
+                hi = cnt - 1
+                while mid <= hi:
+                    j = self.nbr[i, mid]
+                    g = group[j]
+                    if g == 0:
+                        self.nbr[i, mid] = self.nbr[i, lo]
+                        self.nbr[i, lo] = j
+                        lo += 1
+                        mid += 1
+                    elif g == 1:
+                        mid += 1
+                    else:
+                        self.nbr[i, mid] = self.nbr[i, hi]
+                        self.nbr[i, hi] = j
+                        hi -= 1
             c0 = 0
             c1 = 0
             for k in range(cnt):
-                j = self.nbr[i, k]
-                self._row[i, k] = j
-                g = group[j]
+                g = group[self.nbr[i, k]]
                 if g == 0:
                     c0 += 1
                 elif g == 1:
                     c1 += 1
-            p0 = 0
-            p1 = c0
-            p2 = c0 + c1
-            for k in range(cnt):
-                j = self._row[i, k]
-                g = group[j]
-                if g == 0:
-                    self.nbr[i, p0] = j
-                    p0 += 1
-                elif g == 1:
-                    self.nbr[i, p1] = j
-                    p1 += 1
-                else:
-                    self.nbr[i, p2] = j
-                    p2 += 1
             self.nbr_split[i] = ti.Vector([c0, c0 + c1])
 
     def group_rows(self, group, n: int):
-        """Order the first n lists by the group of each neighbour (`group[j]` in 0, 1, 2; stable within a
-        group) and set `nbr_split[i]` = (start of group 1, start of group 2). A grid built with `grouped`."""
+        """Set `nbr_split` of the first n lists (restored from a checkpoint: the split is not saved) from the
+        group of each neighbour (`group[j]` in 0, 1, 2); a list not in group order (saved by a code that did
+        not group) is first put in group order in place. Lists in group order are left as they are. A grid
+        built with `grouped`."""
         if not self.grouped:
             raise RuntimeError("group_rows() needs a grid built with grouped=True")
         self._group_rows(group, int(n))

@@ -264,8 +264,8 @@ class WCSPHSolver(SolverCommon):
             if "plastic_strain" in init:  # two-stage run (stage.py)
                 self.soil.eps_p.from_numpy(init["plastic_strain"].astype(f))
 
-        # with soil, each list holds the soil neighbours first, then the walls, then the fluid (`group`,
-        # grid.group_rows): the fluid's pair pass walks walls and fluid, the soil's stress soil and walls, the
+        # with soil, each list holds the soil neighbours first, then the walls, then the fluid (`group`, the
+        # grid's grouped build): the fluid's pair pass walks walls and fluid, the soil's stress soil and walls, the
         # drag passes the other set, each its own range of the list
         self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.cell, self.max_nb, period=self.period,
                                   grouped=self.has_soil)
@@ -763,11 +763,9 @@ class WCSPHSolver(SolverCommon):
         self.r_list = min(self.cell, 2.0 * self.hmax + self.skin)
         try:
             self.grid.build_neighbour_lists(self.x, self.fmask, self.n, self.r_list, self.ids,
-                                            in_place=reorder)
+                                            in_place=reorder, group=self.group if self.has_soil else None)
         except NeighbourOverflowError as exc:
             raise guard.neighbour_overflow_error(self.step_count, self.time, exc) from None
-        if self.has_soil:
-            self.grid.group_rows(self.group, self.n)
         self._k_after_build(dt, w[0], w[1])
         self.rebuilds += 1
 
@@ -906,7 +904,7 @@ class WCSPHSolver(SolverCommon):
         restore(self.soil, {k: v for k, v in state.items() if k in soil_keys}, self.soil.state_fields,
                 self.soil.state_scalars)
         self._k_moving_list()  # a function of fmask, which the state holds
-        if self.has_soil:  # the lists' order by group (a state from before it was kept, too)
+        if self.has_soil:  # where each list's groups start (and their order, for a state saved ungrouped)
             self._k_mask()
             self.grid.group_rows(self.group, self.n)
 
