@@ -62,8 +62,8 @@ def run_cases(src: Path, out: Path, only: list[str] | None, sets: list[str] | No
         if only and name not in only:
             continue
         cmd = [sys.executable, "-m", "taichi_sph.cli", "--config", str(src / "configs" / f"{config}.yaml"),
-               *extra, *[a for kv in sets or () for a in ("--set", kv)], "--set", "threads=1", "--set", "output.every=0.001", "--out", str(out / f"{name}.h5"),
-               "-q"]
+               *extra, *[a for kv in sets or () for a in ("--set", kv)], "--set", "threads=1",
+               "--set", "output.every=0.001", "--out", str(out / f"{name}.h5"), "-q"]
         with open(out / f"{name}.log", "w") as log:
             rc = subprocess.call(cmd, cwd=src, env=env, stdout=log, stderr=subprocess.STDOUT)
         print(f"{name:22s} rc={rc}", flush=True)

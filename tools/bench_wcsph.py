@@ -60,6 +60,7 @@ DAM = "configs/dambreak_wcsph.yaml"
 
 def case_table(args) -> dict:
     levee = str(Path(args.levee).resolve())
+    saturated = f"{Path(levee).name} {('variant ' + args.saturated) if args.saturated else 'stage 2'}"
     return {
         "dambreak_20k": (str(ROOT / DAM), None, ["dx=0.01"], "2D dam break, dx 1 cm (20k water)"),
         "dambreak_80k": (str(ROOT / DAM), None, ["dx=0.005"], "2D dam break, dx 5 mm (80k water)"),
@@ -74,7 +75,7 @@ def case_table(args) -> dict:
             levee,
             args.saturated or None,
             ["wcsph.soil.start_from=null"],
-            f"levee, soil + water ({Path(levee).name} {('variant ' + args.saturated) if args.saturated else 'stage 2'})",
+            f"levee, soil + water ({saturated})",
         ),
         "levee_dry": (
             levee,
@@ -88,8 +89,7 @@ def case_table(args) -> dict:
             levee,
             args.saturated or None,
             ["wcsph.soil.start_from=null", "dx=0.004"],
-            f"levee at dx 4 mm, soil + water ({Path(levee).name} "
-            f"{('variant ' + args.saturated) if args.saturated else 'stage 2'})",
+            f"levee at dx 4 mm, soil + water ({saturated})",
         ),
     }
 
