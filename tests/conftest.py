@@ -4,6 +4,7 @@ Taichi allows one live runtime per process: in-process tests share one CPU/f64 r
 whole session (fixture `ti_cpu`); whole simulations run the CLI in a subprocess (`run_cli`).
 """
 
+import functools
 import os
 import subprocess
 import sys
@@ -12,6 +13,31 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+@functools.lru_cache(maxsize=1)
+def cuda_available() -> bool:
+    """Whether Taichi starts on CUDA here (asked in a subprocess: this process's runtime is the CPU's).
+    Without an NVIDIA driver (neither /dev/nvidiactl nor nvidia-smi) the answer is no at once."""
+    import shutil
+
+    if not (os.path.exists("/dev/nvidiactl") or shutil.which("nvidia-smi")):
+        return False
+    code = ("import taichi as ti; ti.init(arch=ti.cuda, log_level=ti.ERROR); "
+            "raise SystemExit(0 if ti.lang.impl.current_cfg().arch == ti.cuda else 1)")
+    try:
+        return subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=120).returncode == 0
+    except (OSError, subprocess.SubprocessError):
+        return False
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests marked `cuda` are skipped where Taichi finds no CUDA GPU."""
+    marked = [item for item in items if item.get_closest_marker("cuda")]
+    if marked and not cuda_available():
+        skip = pytest.mark.skip(reason="no CUDA GPU found by Taichi")
+        for item in marked:
+            item.add_marker(skip)
 
 
 @pytest.fixture(scope="session")

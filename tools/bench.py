@@ -4,7 +4,7 @@ Modes: isph_free (hydrostatic tank at rest), isph_porous (the seed's free fall i
 configs/freefall.yaml geometry, Smagorinsky on), wcsph (the dam break of configs/dambreak_wcsph.yaml,
 tank 4 x 3 m, column 1 x 2 m; in 3D 0.2 m wide), wcsph_soil (a hook: listed, skipped until that
 mode exists). Sizes S, M, L are about 10k, 50k and 200k water particles (dx chosen from the water
-volume). Each case runs in its own process (one Taichi runtime per process), which gives:
+volume); XL, about 1M, is for GPUs. Each case runs in its own process (one Taichi runtime per process), which gives:
 
 - particle-steps per second (water particles x steps / wall seconds; MIPPS = millions of them),
 - time per phase (the solver's own timers) and PPE CG iterations per step (isph),
@@ -12,13 +12,15 @@ volume). Each case runs in its own process (one Taichi runtime per process), whi
   dimension one step runs with an empty Taichi offline cache (cold JIT) and again with it filled
   (warm JIT); the timed runs use the project cache directory `.cache/bench` (field sizes are
   compile-time constants, so each size has its own cache entries),
-- peak memory: the largest resident set of the process (ru_maxrss).
+- peak memory: the largest resident set of the process (ru_maxrss); on CUDA also the device memory the
+  case took (the GPU's used memory at the end of the case less before Taichi started, from nvidia-smi).
 
 Writes docs/performance.json and the generated table into docs/performance.md between the markers
 `<!-- bench:begin -->` and `<!-- bench:end -->` (the rest of that file is kept), machine named.
 
     python tools/bench.py --quick             # size S, 2D and 3D, every mode (a few minutes on 2 cores)
-    python tools/bench.py [--modes ...] [--dims 2 3] [--sizes S M L] [--arch cpu cuda] [--min-time 10]
+    python tools/bench.py [--modes ...] [--dims 2 3] [--sizes S M L XL] [--arch cpu cuda] [--min-time 10]
+        [--no-jit]   # skip the cold / warm JIT runs of the smallest size
 """
 
 import argparse
@@ -35,7 +37,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-SIZES = {"S": 10_000, "M": 50_000, "L": 200_000}
+SIZES = {"S": 10_000, "M": 50_000, "L": 200_000, "XL": 1_000_000}
 BEGIN, END = "<!-- bench:begin -->", "<!-- bench:end -->"
 
 
@@ -49,6 +51,26 @@ def machine() -> str:
     except OSError:
         pass
     return f"{cpu}, {os.cpu_count()} logical cores, {platform.system()} {platform.release()}"
+
+
+def gpu_memory_used_mb() -> float | None:
+    """The first GPU's used memory (MB) from nvidia-smi, or None without one."""
+    try:
+        out = subprocess.run(["nvidia-smi", "--query-gpu=memory.used", "--format=csv,noheader,nounits"],
+                             capture_output=True, text=True, timeout=30).stdout.split()
+        return float(out[0]) if out else None
+    except (OSError, subprocess.SubprocessError, ValueError):
+        return None
+
+
+def gpu_name() -> str | None:
+    """The first GPU's name, memory and driver from nvidia-smi, or None without one."""
+    try:
+        out = subprocess.run(["nvidia-smi", "--query-gpu=name,memory.total,driver_version", "--format=csv,noheader"],
+                             capture_output=True, text=True, timeout=30).stdout.strip()
+        return out.splitlines()[0] if out else None
+    except (OSError, subprocess.SubprocessError):
+        return None
 
 
 # ---------------------------------------------------------------------------------------- cases
@@ -122,6 +144,7 @@ def run_case(spec: dict) -> dict:
     from taichi_sph.scene import build_scene
     from taichi_sph.solvers import make_solver
 
+    gpu_before = gpu_memory_used_mb() if spec["arch"] == "cuda" else None
     be = backend.init(spec["arch"], spec.get("precision", "auto"))
     data = MODES[spec["mode"]](spec["dim"], spec["target"])
     for key, value in spec.get("set", {}).items():
@@ -173,6 +196,7 @@ def run_case(spec: dict) -> dict:
         "phase_seconds_per_step": {k: v / steps for k, v in solver.timers.items()},
         "jit_seconds": max(first - per_step, 0.0),
         "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "device_memory_mb": (gpu_memory_used_mb() - gpu_before) if gpu_before is not None else None,
     }
 
 
@@ -189,28 +213,30 @@ def spawn(spec: dict, cache: Path) -> dict:
 
 # ---------------------------------------------------------------------------------------- report
 def markdown(results, info) -> str:
+    gpu = f" GPU: {info['gpu']}." if info.get("gpu") else ""
     lines = [
-        (f"Machine: {info['machine']}; Taichi {info['taichi']}, {info['threads']} CPU threads, load average "
+        (f"Machine: {info['machine']};{gpu} Taichi {info['taichi']}, {info['threads']} CPU threads, load average "
          f"{info['load']:.1f} at start. Produced by `python tools/bench.py {info['args']}` on {info['date']}."),
         "",
         ("| mode | dim | size | arch | precision | dx | water particles | M particle-steps/s | ms/step | CG iters "
-         "| CPU s / wall s | JIT s (cold / warm) | peak memory MB | ms per phase |"),
-        "|---|---|---|---|---|---|---:|---:|---:|---:|---:|---|---:|---|",
+         "| CPU s / wall s | JIT s (cold / warm) | peak memory MB | GPU memory MB | ms per phase |"),
+        "|---|---|---|---|---|---|---:|---:|---:|---:|---:|---|---:|---:|---|",
     ]
     for r in results:
         label = r["mode"] + (f" ({r['ppe']})" if r.get("ppe") else "")
         head = f"| {label} | {r['dim']}D | {r['size']} | {r['arch']} "
         if "error" in r:
-            lines.append(head + f"| | | | | | | | | | not run: {r['error']} |")
+            lines.append(head + f"| | | | | | | | | | | not run: {r['error']} |")
             continue
         jit = f"{r['jit_seconds']:.1f}"
         if "jit_cold_seconds" in r:
             jit = f"{r['jit_cold_seconds']:.1f} / {r['jit_seconds']:.1f}"
         cg = "" if r["cg_iterations_mean"] is None else f"{r['cg_iterations_mean']:.0f}"
         ph = ", ".join(f"{k} {1e3 * v:.1f}" for k, v in r["phase_seconds_per_step"].items() if v > 0)
+        gpu_mem = "" if r.get("device_memory_mb") is None else f"{r['device_memory_mb']:.0f}"
         lines.append(head + f"| {r['precision']} | {r['dx']:g} | {r['water_particles']} | {r['mipps']:.3f} | "
                      f"{1e3 * r['seconds_per_step']:.1f} | {cg} | {r['cpu_over_wall']:.2f} | {jit} | "
-                     f"{r['peak_memory_mb']:.0f} | {ph} |")
+                     f"{r['peak_memory_mb']:.0f} | {gpu_mem} | {ph} |")
     return "\n".join(lines)
 
 
@@ -255,6 +281,7 @@ def main(argv=None) -> int:
     ap.add_argument("--ppe", nargs="+", default=[None], choices=["sparse_cg", "ell_pcg", "mg_pcg"],
                     help="isph PPE solver types to run, each case with each in turn (default: the config's)")
     ap.add_argument("--min-time", type=float, default=10.0, help="seconds of timed steps per case")
+    ap.add_argument("--no-jit", action="store_true", help="skip the cold / warm JIT runs of the smallest size")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                     help="config override for every case, e.g. isph.ppe.type=sparse_cg")
     ap.add_argument("--out", default=str(ROOT / "docs" / "performance.md"))
@@ -286,7 +313,7 @@ def main(argv=None) -> int:
                     for ppe in ppes:  # back to back, so that load from elsewhere hits them alike
                         pspec = spec if ppe is None else {**spec, "set": {**overrides, "isph.ppe.type": ppe}}
                         jit = None
-                        if size == sizes[0]:
+                        if size == sizes[0] and not args.no_jit:
                             # one step with an empty offline cache (cold JIT), then again with it filled (warm)
                             one = {**pspec, "min_time": 0.0, "max_steps": 1, "warmup": 0}
                             with tempfile.TemporaryDirectory() as tmp:
@@ -301,7 +328,7 @@ def main(argv=None) -> int:
                         print(f"{mode} {ppe or ''} {dim}D {size} {arch}: {msg}", flush=True)
     import taichi as ti
 
-    info = {"machine": machine(), "taichi": ".".join(map(str, ti.__version__)),
+    info = {"machine": machine(), "gpu": gpu_name() if "cuda" in args.arch else None, "taichi": ".".join(map(str, ti.__version__)),
             "threads": os.environ.get("TI_CPU_MAX_NUM_THREADS", os.cpu_count()), "load": load,
             "date": time.strftime("%Y-%m-%d"), "args": " ".join(argv if argv is not None else sys.argv[1:])}
     write_report(Path(args.out), results, info, keep=args.keep)
