@@ -264,3 +264,28 @@ def test_f32_reports_its_true_residual(lattice):
     # of the same size as the residual itself, so within a factor 2
     assert 0.5 * true_res <= res <= 2.0 * true_res
     assert np.linalg.norm(x - x_exact) / np.linalg.norm(x_exact) <= cond * true_res
+
+
+@pytest.mark.parametrize("case", ["lattice", "spd"])
+def test_two_stage_reduction_gives_the_atomic_iterates(case, request):
+    """The two-stage dot products (the CUDA f64 choice, forced here on the CPU) are the same CG: the same
+    solution to the tolerance and the same iteration count within the round-off that moves the crossing
+    of the tolerance (the sums are taken in another order), as against scipy above."""
+    A, b, x_exact, cond = request.getfixturevalue(case)
+    n = A.shape[0]
+    runs = {}
+    for reduction in ("atomic", "two_stage"):
+        solver = EllPCG(n, max_offdiag(A), TOL, 5000, reduction=reduction)
+        assert solver.reduction == reduction
+        solver.load_csr(A.indptr, A.indices, A.data, b, np.zeros(n))
+        it, res, ok = solver.solve()
+        check_solution(A, b, x_exact, cond, solver.x.to_numpy(), it, res, ok)
+        runs[reduction] = it
+    assert abs(runs["atomic"] - runs["two_stage"]) <= 2, runs
+
+
+def test_reduction_choice(ti_cpu):
+    """auto is Taichi's atomic reduction on the CPU; a bad name is refused."""
+    assert EllPCG(10, 4).reduction == "atomic"
+    with pytest.raises(ValueError, match="reduction"):
+        EllPCG(10, 4, reduction="tree")

@@ -17,7 +17,7 @@ from .test_ell_pcg import check_solution, max_offdiag, sph_lattice_ppe
 TOL = 1.0e-8
 
 
-def lattice_solver(shape, tol=TOL, **kw):
+def lattice_solver(shape, tol=TOL, reduction="auto", **kw):
     """The jittered-lattice PPE of test_ell_pcg in an MGPCG, each row given the cell (edge = the kernel
     support 2.4 dx, as the neighbour grid's) of its particle."""
     dx = 0.01
@@ -27,7 +27,7 @@ def lattice_solver(shape, tol=TOL, **kw):
     cc = np.floor((x - lo) / re).astype(np.int64)
     ncell = tuple(int(v) for v in cc.max(axis=0) + 1)
     n = A.shape[0]
-    mg = MGPCG(n, max_offdiag(A), tol, 500, cells=ncell)
+    mg = MGPCG(n, max_offdiag(A), tol, 500, cells=ncell, reduction=reduction)
     mg.load_csr(A.indptr, A.indices, A.data, b, np.zeros(n))
     mg.load_cells(np.ravel_multi_index(cc.T, ncell))
     return mg, A, b
@@ -56,9 +56,11 @@ def test_vcycle_is_symmetric_positive_definite(ti_cpu, shape):
         assert r @ mg.apply(r) > 0.0
 
 
+@pytest.mark.parametrize("reduction", ["atomic", "two_stage"])
 @pytest.mark.parametrize("shape", [(30, 30), (12, 12, 12)])
-def test_solution_matches_scipy(ti_cpu, shape):
-    mg, A, b = lattice_solver(shape)
+def test_solution_matches_scipy(ti_cpu, shape, reduction):
+    """Both ways of summing CG's dot products (two_stage is the CUDA f64 choice, forced here)."""
+    mg, A, b = lattice_solver(shape, reduction=reduction)
     x_exact = spl.spsolve(A.tocsc(), b)
     cond = np.linalg.cond(A.toarray())
     it, res, ok = mg.solve()

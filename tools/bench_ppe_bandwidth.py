@@ -20,9 +20,11 @@ each iteration streams the matrix once and a handful of vectors. This tool measu
   and bytes / time is the bandwidth it achieves. Reported against the copy kernel's.
 
 Both ELL layouts ("row": a row's slots together; "column": slot k of consecutive rows together) and f32
-and f64 are run.
+and f64 are run, each with the solver's reduction for that precision (`reduction="auto"`: two-stage
+dot products for f64 on CUDA), or with those named by `--reductions`.
 
     python tools/bench_ppe_bandwidth.py [--arch cuda] [--sizes 2d1m 2d4m 3d1m] [--iterations 200]
+        [--reductions auto atomic two_stage]
 """
 
 
@@ -92,14 +94,15 @@ def lattice_offsets(dim: int):
     return offs, [float(c) for c in coef]
 
 
-def bench_size(ti, name: str, shape, dtype, layout: str, iterations: int) -> dict:
+def bench_size(ti, name: str, shape, dtype, layout: str, iterations: int, reduction: str = "auto") -> dict:
     from taichi_sph.linalg.ell_pcg import EllPCG
 
     dim = len(shape)
     n = int(np.prod(shape))
     offs, coef = lattice_offsets(dim)
     width = len(offs)
-    ell = EllPCG(n, width, tolerance=1e-30, max_iterations=iterations, dtype=dtype, layout=layout)
+    ell = EllPCG(n, width, tolerance=1e-30, max_iterations=iterations, dtype=dtype, layout=layout,
+                 reduction=reduction)
     strides = [int(np.prod(shape[k + 1:])) for k in range(dim)]
     top = shape[-1]
     off_f = ti.Vector.field(dim, ti.i32, width)
@@ -153,7 +156,7 @@ def bench_size(ti, name: str, shape, dtype, layout: str, iterations: int) -> dic
     f = 8 if dtype == ti.f64 else 4
     nbytes = 3 * n * f + n * (4 + 3 * f) + nnz * (4 + f) + 8 * n * f
     return {"case": name, "rows": n, "dim": dim, "precision": "f64" if dtype == ti.f64 else "f32", "layout": layout,
-            "nnz_per_row": nnz / n, "ms_per_iteration": 1e3 * per_iter, "bytes_per_iteration": nbytes,
+            "reduction": ell.reduction, "nnz_per_row": nnz / n, "ms_per_iteration": 1e3 * per_iter, "bytes_per_iteration": nbytes,
             "gb_per_s": nbytes / per_iter / 1e9, "fill_s_first": fill_s}
 
 
@@ -163,6 +166,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sizes", nargs="+", default=["2d1m", "2d4m", "3d1m"], choices=list(SIZES))
     ap.add_argument("--precisions", nargs="+", default=["f32", "f64"], choices=["f32", "f64"])
     ap.add_argument("--layouts", nargs="+", default=["column", "row"], choices=["column", "row"])
+    ap.add_argument("--reductions", nargs="+", default=["auto"], choices=["auto", "atomic", "two_stage"])
     ap.add_argument("--iterations", type=int, default=200)
     ap.add_argument("--copy-mb", type=float, default=1024.0, help="MB per array of the copy kernel")
     ap.add_argument("--json", type=Path)
@@ -176,16 +180,19 @@ def main(argv=None) -> int:
     for name in args.sizes:
         for prec in args.precisions:
             for layout in args.layouts:
-                r = bench_size(ti, name, SIZES[name], ti.f64 if prec == "f64" else ti.f32, layout, args.iterations)
-                r["fraction_of_copy"] = r["gb_per_s"] * 1e9 / copy[prec]
-                rows.append(r)
-                print(json.dumps(r), flush=True)
+                for reduction in args.reductions:
+                    r = bench_size(ti, name, SIZES[name], ti.f64 if prec == "f64" else ti.f32, layout,
+                                   args.iterations, reduction)
+                    r["fraction_of_copy"] = r["gb_per_s"] * 1e9 / copy[prec]
+                    rows.append(r)
+                    print(json.dumps(r), flush=True)
     lines = [f"Arch {args.arch}; copy kernel: " + ", ".join(f"{p} {v / 1e9:.0f} GB/s" for p, v in copy.items()), "",
-             "| lattice | rows | entries/row | precision | layout | ms / iteration | MB / iteration | GB/s | of copy |",
-             "|---|---:|---:|---|---|---:|---:|---:|---:|"]
+             "| lattice | rows | entries/row | precision | layout | reduction | ms / iteration | MB / iteration | GB/s "
+             "| of copy |",
+             "|---|---:|---:|---|---|---|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['case']} | {r['rows']} | {r['nnz_per_row'] + 1:.1f} | {r['precision']} | {r['layout']} | "
-                     f"{r['ms_per_iteration']:.3f} | {r['bytes_per_iteration'] / 1e6:.0f} | {r['gb_per_s']:.0f} | "
+                     f"{r['reduction']} | {r['ms_per_iteration']:.3f} | {r['bytes_per_iteration'] / 1e6:.0f} | {r['gb_per_s']:.0f} | "
                      f"{100 * r['fraction_of_copy']:.0f} % |")
     print("\n".join(lines))
     if args.json:

@@ -51,6 +51,15 @@ MAX_RESTARTS times, within `max_iterations` iterations in all. A zero right-hand
 A matrix whose null space is the constants (a PPE without any Dirichlet row: a closed or periodic box
 full of water) is solved with `zero_mean=True`: b is projected onto the range of A (its mean
 removed), CG converges in that range, and the zero-mean solution is returned.
+Dot products on CUDA in f64 (`reduction="auto"`): Taichi 1.7.4 reduces a sum into one scalar by giving
+each GPU thread its partial sum and then adding the partials with one atomic per thread into that
+scalar; its CUDA runtime combines a warp's partials first only for f32 and i32. In f64 every launched
+thread (about half a million on an H100) adds into the same address, serialised: 5.1 ms per CG
+iteration whatever the matrix size (1M or 4M rows, docs/performance.md, "GPU"). The "two_stage"
+reduction has STAGE_THREADS threads each sum rows t, t + STAGE_THREADS, ... (neighbouring threads take
+neighbouring rows, so the loads stay coalesced) into its own slot, then FOLD_THREADS threads fold those
+slots, then one thread adds the FOLD_THREADS folds in order: no atomics, and the same sum on every run.
+"atomic" keeps Taichi's reduction (the CPU's choice: there the partials are per CPU thread).
 The vectors use the runtime's default float (f32 or f64) unless `dtype` is given. An f32 solve stalls
 where the rounding of b - A x, about eps_32 |A| |x| / |b|, meets the tolerance (1e-5 to 1e-4 relative
 on a 900-row PPE) and then reports converged = False.
@@ -63,6 +72,9 @@ import taichi as ti
 
 #: true-residual restarts allowed after the recurrence residual has met the tolerance
 MAX_RESTARTS = 3
+#: two-stage dot products: threads of the first stage (each sums every STAGE_THREADS-th row), and of the fold
+STAGE_THREADS = 1 << 16
+FOLD_THREADS = 256
 
 
 class EllOverflowError(RuntimeError):
@@ -91,12 +103,16 @@ class EllPCG:
     stream; measured fastest on CPU), "column" stores slot k of consecutive rows contiguously (the
     usual GPU ELL layout, for coalesced loads; not measured here on a GPU); "auto" picks "column" on
     CUDA and "row" elsewhere.
+
+    reduction: how an iteration's dot products are summed: "atomic" (Taichi's own reduction), "two_stage"
+    (partial sums in slots, folded without atomics; see the module's docstring), or "auto": "two_stage"
+    for f64 on CUDA, "atomic" elsewhere.
     """
 
     name = "ell_pcg"
 
     def __init__(self, n_max: int, max_nb: int, tolerance: float = 1.0e-8, max_iterations: int = 2000,
-                 dtype=None, layout: str = "auto"):
+                 dtype=None, layout: str = "auto", reduction: str = "auto"):
         if n_max < 1 or max_nb < 1:
             raise ValueError(f"EllPCG needs n_max >= 1 and max_nb >= 1, not {n_max} and {max_nb}")
         self.n_max = int(n_max)
@@ -111,6 +127,16 @@ class EllPCG:
         if layout not in ("row", "column"):
             raise ValueError(f"layout must be 'row', 'column' or 'auto', not {layout!r}")
         self.layout = layout
+        if reduction == "auto":
+            from taichi.lang import impl
+
+            reduction = "two_stage" if impl.current_cfg().arch == ti.cuda and fp == ti.f64 else "atomic"
+        if reduction not in ("atomic", "two_stage"):
+            raise ValueError(f"reduction must be 'atomic', 'two_stage' or 'auto', not {reduction!r}")
+        self.reduction = reduction
+        if reduction == "two_stage":
+            self.stage = ti.Vector.field(2, fp, STAGE_THREADS)
+            self.fold = ti.Vector.field(2, fp, FOLD_THREADS)
         self.cols = ti.field(ti.i32)
         self.vals = ti.field(fp)
         for f in (self.cols, self.vals):
@@ -174,7 +200,8 @@ class EllPCG:
     def with_width(self, max_nb: int) -> "EllPCG":
         """A new solver with `max_nb` slots per row and the same settings, its x copied from this one
         (warm start); the matrix must be filled again. Its kernels compile anew (once)."""
-        other = EllPCG(self.n_max, max_nb, self.tolerance, self.max_iterations, self.dtype, self.layout)
+        other = EllPCG(self.n_max, max_nb, self.tolerance, self.max_iterations, self.dtype, self.layout,
+                       self.reduction)
         other.x.copy_from(self.x)
         other.n[None] = self.n[None]
         return other
@@ -302,6 +329,77 @@ class EllPCG:
             out = -1.0
         return out
 
+    @ti.func
+    def _folded(self):
+        """The sum of the first stage's slots (two components), folded by FOLD_THREADS threads and then
+        added in order by one: no atomics, the same result on every run."""
+        zero = ti.cast(0, self.dtype)
+        for u in range(FOLD_THREADS):
+            s = ti.Vector([zero, zero])
+            t = u
+            while t < STAGE_THREADS:
+                s += self.stage[t]
+                t += FOLD_THREADS
+            self.fold[u] = s
+        total = ti.Vector([zero, zero])
+        ti.loop_config(serialize=True)
+        for u in range(FOLD_THREADS):
+            total += self.fold[u]
+        return total
+
+    @ti.kernel
+    def _k_iterate_two_stage(self, jacobi: ti.template()) -> ti.f64:
+        """`_k_iterate` with its dot products summed in two stages (reduction "two_stage")."""
+        n = self.n[None]
+        zero = ti.cast(0, self.dtype)
+        beta = self.beta[None]
+        for i in range(n):
+            self.p[i] = self.z[i] + beta * self.p[i]
+        for t in range(STAGE_THREADS):
+            s = zero
+            i = t
+            while i < n:
+                api = self.row_times(i, self.p)
+                self.ap[i] = api
+                s += self.p[i] * api
+                i += STAGE_THREADS
+            self.stage[t] = ti.Vector([s, zero])
+        pap = self._folded()[0]
+        self.pap[None] = pap
+        self.breakdown[None] = 0
+        self.alpha[None] = zero
+        if pap > 0:
+            self.alpha[None] = self.rz[None] / pap
+        else:
+            self.breakdown[None] = 1
+        alpha = self.alpha[None]
+        for t in range(STAGE_THREADS):
+            s = ti.Vector([zero, zero])
+            i = t
+            while i < n:
+                self.x[i] += alpha * self.p[i]
+                ri = self.r[i] - alpha * self.ap[i]
+                self.r[i] = ri
+                s[0] += ri * ri
+                if ti.static(jacobi):
+                    zi = self.inv_diag[i] * ri
+                    self.z[i] = zi
+                    s[1] += ri * zi
+                i += STAGE_THREADS
+            self.stage[t] = s
+        sums = self._folded()
+        self.rr[None] = sums[0]
+        if ti.static(jacobi):
+            self.rz_new[None] = sums[1]
+            self.beta[None] = zero
+            if self.rz[None] > 0:
+                self.beta[None] = sums[1] / self.rz[None]
+            self.rz[None] = sums[1]
+        out = ti.cast(sums[0], ti.f64)
+        if self.breakdown[None] == 1:
+            out = -1.0
+        return out
+
     @ti.kernel
     def _k_remove_mean(self, v: ti.template()):
         """v -= mean(v) over the first n rows (summed in f64)."""
@@ -335,7 +433,13 @@ class EllPCG:
 
     def _iterate(self) -> float:
         """One PCG iteration; returns the recurrence |r|^2, or -1 on breakdown."""
-        return self._k_iterate(True)
+        return self._k_iterate_step(True)
+
+    def _k_iterate_step(self, jacobi: bool) -> float:
+        """`_k_iterate` or its two-stage form, as `reduction` says."""
+        if self.reduction == "two_stage":
+            return self._k_iterate_two_stage(jacobi)
+        return self._k_iterate(jacobi)
 
     # ------------------------------------------------------------------ host API
     def check_overflow(self) -> None:

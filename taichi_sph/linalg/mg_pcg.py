@@ -96,8 +96,8 @@ class MGPCG(EllPCG):
 
     def __init__(self, n_max: int, max_nb: int, tolerance: float = 1.0e-8, max_iterations: int = 2000,
                  dtype=None, layout: str = "auto", *, cells, periodic=None, overcorrection: float = OVERCORRECTION,
-                 source=None):
-        super().__init__(n_max, max_nb, tolerance, max_iterations, dtype, layout)
+                 source=None, reduction: str = "auto"):
+        super().__init__(n_max, max_nb, tolerance, max_iterations, dtype, layout, reduction)
         dim = len(cells)
         if dim not in (1, 2, 3) or any(int(c) < 1 for c in cells):
             raise ValueError(f"cells must give 1 to 3 positive counts, not {cells}")
@@ -153,7 +153,7 @@ class MGPCG(EllPCG):
     def with_width(self, max_nb: int) -> "MGPCG":
         other = MGPCG(self.n_max, max_nb, self.tolerance, self.max_iterations, self.dtype, self.layout,
                       cells=self.cells, periodic=self.periodic, overcorrection=self.overcorrection,
-                      source=self.source)
+                      source=self.source, reduction=self.reduction)
         other.x.copy_from(self.x)
         other.agg.copy_from(self.agg)
         other.n[None] = self.n[None]
@@ -567,7 +567,7 @@ class MGPCG(EllPCG):
         # iteration or on the final check of the true residual
         self._vcycle(1 if self._fresh else 0)
         self._fresh = False
-        return float(self._k_iterate(False))
+        return float(self._k_iterate_step(False))
 
     # ------------------------------------------------------------------ host helpers (tests, tools)
     def apply(self, r) -> np.ndarray:
