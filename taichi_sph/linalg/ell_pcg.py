@@ -135,8 +135,8 @@ class EllPCG:
             raise ValueError(f"reduction must be 'atomic', 'two_stage' or 'auto', not {reduction!r}")
         self.reduction = reduction
         if reduction == "two_stage":
-            self.stage = ti.Vector.field(2, fp, STAGE_THREADS)
-            self.fold = ti.Vector.field(2, fp, FOLD_THREADS)
+            self.stage = ti.Vector.field(3, fp, STAGE_THREADS)
+            self.fold = ti.Vector.field(3, fp, FOLD_THREADS)
         self.cols = ti.field(ti.i32)
         self.vals = ti.field(fp)
         for f in (self.cols, self.vals):
@@ -286,6 +286,41 @@ class EllPCG:
         return ti.Vector([ti.cast(self.bb[None], ti.f64), ti.cast(self.rr[None], ti.f64)])
 
     @ti.kernel
+    def _k_residual_two_stage(self, jacobi: ti.template()) -> ti.types.vector(2, ti.f64):
+        """r = b - A x, and with `jacobi` z = M^-1 r and beta = 0 (`_k_residual`), its sums |b|^2, |r|^2
+        and r.z in two stages (reduction "two_stage"); returns (|b|^2, |r|^2)."""
+        n = self.n[None]
+        zero = ti.cast(0, self.dtype)
+        one = ti.cast(1, self.dtype)
+        for t in range(STAGE_THREADS):
+            s = ti.Vector([zero, zero, zero])
+            i = t
+            while i < n:
+                bi = self.b[i]
+                ri = bi - self.row_times(i, self.x)
+                self.r[i] = ri
+                s[0] += bi * bi
+                s[1] += ri * ri
+                if ti.static(jacobi):
+                    d = self.diag[i]
+                    inv = one
+                    if d > 0:
+                        inv = one / d
+                    self.inv_diag[i] = inv
+                    zi = inv * ri
+                    self.z[i] = zi
+                    s[2] += ri * zi
+                i += STAGE_THREADS
+            self.stage[t] = s
+        sums = self._folded()
+        self.bb[None] = sums[0]
+        self.rr[None] = sums[1]
+        if ti.static(jacobi):
+            self.rz[None] = sums[2]
+            self.beta[None] = zero
+        return ti.Vector([ti.cast(sums[0], ti.f64), ti.cast(sums[1], ti.f64)])
+
+    @ti.kernel
     def _k_iterate(self, jacobi: ti.template()) -> ti.f64:
         """One PCG iteration: p = z + beta p, alpha = r.z / p.Ap, x += alpha p, r -= alpha Ap; with `jacobi`
         also z = D^-1 r, r.z and the next beta (a preconditioner of its own, as the multigrid V-cycle of
@@ -331,17 +366,17 @@ class EllPCG:
 
     @ti.func
     def _folded(self):
-        """The sum of the first stage's slots (two components), folded by FOLD_THREADS threads and then
+        """The sum of the first stage's slots (three components), folded by FOLD_THREADS threads and then
         added in order by one: no atomics, the same result on every run."""
         zero = ti.cast(0, self.dtype)
         for u in range(FOLD_THREADS):
-            s = ti.Vector([zero, zero])
+            s = ti.Vector([zero, zero, zero])
             t = u
             while t < STAGE_THREADS:
                 s += self.stage[t]
                 t += FOLD_THREADS
             self.fold[u] = s
-        total = ti.Vector([zero, zero])
+        total = ti.Vector([zero, zero, zero])
         ti.loop_config(serialize=True)
         for u in range(FOLD_THREADS):
             total += self.fold[u]
@@ -363,7 +398,7 @@ class EllPCG:
                 self.ap[i] = api
                 s += self.p[i] * api
                 i += STAGE_THREADS
-            self.stage[t] = ti.Vector([s, zero])
+            self.stage[t] = ti.Vector([s, zero, zero])
         pap = self._folded()[0]
         self.pap[None] = pap
         self.breakdown[None] = 0
@@ -374,7 +409,7 @@ class EllPCG:
             self.breakdown[None] = 1
         alpha = self.alpha[None]
         for t in range(STAGE_THREADS):
-            s = ti.Vector([zero, zero])
+            s = ti.Vector([zero, zero, zero])
             i = t
             while i < n:
                 self.x[i] += alpha * self.p[i]
@@ -429,6 +464,8 @@ class EllPCG:
 
     def _restart(self):
         """r = b - A x, z = M^-1 r, next direction p = z; returns (|b|^2, |r|^2)."""
+        if self.reduction == "two_stage":
+            return self._k_residual_two_stage(True)
         return self._k_residual()
 
     def _iterate(self) -> float:

@@ -560,6 +560,8 @@ class MGPCG(EllPCG):
 
     def _restart(self):
         self._fresh = True
+        if self.reduction == "two_stage":
+            return tuple(float(v) for v in self._k_residual_two_stage(False))
         return tuple(float(v) for v in self._k_residual_plain())
 
     def _iterate(self) -> float:
