@@ -1,0 +1,91 @@
+"""All the CUDA checks in one command, each within a time budget, one process on the GPU at a time.
+
+In order: Taichi starts on CUDA; the tests marked `cuda`; CPU/CUDA parity (tools/parity.py); every config
+with `--arch cuda` (tools/config_matrix.py); the PPE iteration's bandwidth, both reductions in f64
+(tools/bench_ppe_bandwidth.py); the seed's free fall timed alone; the step benchmark on CUDA
+(tools/bench.py, merged into a copy of docs/performance.md). A check that overruns its budget is stopped
+(its process group killed) and the next one starts; each writes its log and report into OUT.
+
+    python tools/gpu_check.py --out DIR [--only tests parity configs bandwidth freefall bench] [--scale 1.0]
+
+`--scale` multiplies every budget. Prints one line per check (exit status, seconds) and writes
+DIR/summary.txt. Exits 1 when a check fails or overruns.
+"""
+
+import argparse
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PY = sys.executable
+
+#: name -> (budget in seconds, command (OUT is replaced by the output folder))
+CHECKS = {
+    "start": (60, [PY, "-c", "import taichi as ti; ti.init(arch=ti.cuda); "
+                             "assert ti.lang.impl.current_cfg().arch == ti.cuda; print('cuda ok')"]),
+    "tests": (240, [PY, "-m", "pytest", "-q", "-m", "cuda", "tests/test_cuda.py", "-p", "no:cacheprovider"]),
+    "parity": (240, [PY, "tools/parity.py", "--out-dir", "OUT/parity", "--json", "OUT/parity.json"]),
+    "configs": (420, [PY, "tools/config_matrix.py", "--arch", "cuda", "--timeout", "120", "--out-dir", "OUT/configs",
+                      "--json", "OUT/configs.json", "--report", "OUT/performance.md"]),
+    "bandwidth": (120, [PY, "tools/bench_ppe_bandwidth.py", "--sizes", "2d1m", "2d4m", "3d1m", "--iterations", "100",
+                        "--reductions", "atomic", "two_stage", "--json", "OUT/bandwidth.json"]),
+    "freefall": (120, [PY, "-m", "taichi_sph.cli", "--config", "configs/freefall.yaml", "--arch", "cuda",
+                       "--out", "OUT/freefall.h5", "-q"]),
+    "bench": (300, [PY, "tools/bench.py", "--arch", "cuda", "--modes", "isph_free", "isph_porous", "wcsph",
+                    "--dims", "2", "3", "--sizes", "S", "L", "XL", "--min-time", "2", "--no-jit",
+                    "--out", "OUT/performance.md", "--keep"]),
+}
+
+
+def run_check(name: str, budget: float, cmd: list, out: Path) -> tuple[int, float]:
+    cmd = [str(out) + c[3:] if c.startswith("OUT") else c for c in cmd]
+    env = dict(os.environ, TAICHI_SPH_PROGRESS="0", TI_LOG_LEVEL="warn", PYTHONUNBUFFERED="1",
+               PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    t0 = time.perf_counter()
+    with open(out / f"{name}.log", "w") as log:
+        # a process group of its own, so that an overrun kills the check's children too
+        proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+        try:
+            rc = proc.wait(timeout=budget)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+            rc = 124
+    return rc, time.perf_counter() - t0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--only", nargs="+", choices=list(CHECKS))
+    ap.add_argument("--scale", type=float, default=1.0, help="multiplies every budget")
+    args = ap.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    perf = args.out / "performance.md"
+    if not perf.exists():  # the bench and config tables merge into a copy of the project's report
+        for suffix in (".md", ".json"):
+            src = ROOT / "docs" / f"performance{suffix}"
+            if src.exists():
+                shutil.copy(src, args.out / f"performance{suffix}")
+    lines, failed = [], 0
+    for name, (budget, cmd) in CHECKS.items():
+        if args.only and name not in args.only and name != "start":
+            continue
+        rc, seconds = run_check(name, budget * args.scale, cmd, args.out)
+        line = f"{name:10s} exit {rc:3d}  {seconds:6.1f} s  (budget {budget * args.scale:.0f} s)"
+        print(line, flush=True)
+        lines.append(line)
+        failed += rc != 0
+        if name == "start" and rc != 0:
+            break
+    (args.out / "summary.txt").write_text("\n".join(lines) + "\n")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
