@@ -262,13 +262,19 @@ def write_report(out: Path, results, info, keep: bool = False) -> None:
         results = merged(old.get("results", []), results)
         info = {**info, "args": f"{old.get('info', {}).get('args', '')}; then {info['args']}"}
     js.write_text(json.dumps({"info": info, "results": results}, indent=2))
-    block = f"{BEGIN}\n{markdown(results, info)}\n{END}"
-    text = out.read_text() if out.exists() else "# Performance\n\n"
-    if BEGIN in text and END in text:
-        text = text[: text.index(BEGIN)] + block + text[text.index(END) + len(END):]
+    replace_block(out, BEGIN, END, markdown(results, info))
+
+
+def replace_block(path: Path, begin: str, end: str, body: str) -> None:
+    """Put `body` between the markers `begin` and `end` of the Markdown file `path` (the rest of the file
+    kept), or append the markers and body where the file has none."""
+    block = f"{begin}\n{body}\n{end}"
+    text = path.read_text() if path.exists() else "# Performance\n\n"
+    if begin in text and end in text:
+        text = text[: text.index(begin)] + block + text[text.index(end) + len(end):]
     else:
         text = text.rstrip("\n") + "\n\n" + block + "\n"
-    out.write_text(text)
+    path.write_text(text)
 
 
 def main(argv=None) -> int:

@@ -135,30 +135,9 @@ def markdown(rows, info) -> str:
     return "\n".join(lines)
 
 
-def device_name(arch: str) -> str:
-    if arch != "cuda":
-        return "CPU"
-    try:
-        out = subprocess.run(["nvidia-smi", "--query-gpu=name,memory.total,driver_version", "--format=csv,noheader"],
-                             capture_output=True, text=True, timeout=30).stdout.strip()
-        return out.splitlines()[0] if out else "CUDA GPU (nvidia-smi gave nothing)"
-    except (OSError, subprocess.SubprocessError):
-        return "CUDA GPU (nvidia-smi not found)"
-
-
-def write_report(path: Path, block: str) -> None:
-    text = path.read_text() if path.exists() else "# Performance\n\n"
-    block = f"{BEGIN}\n{block}\n{END}"
-    if BEGIN in text and END in text:
-        text = text[: text.index(BEGIN)] + block + text[text.index(END) + len(END):]
-    else:
-        text = text.rstrip("\n") + "\n\n" + block + "\n"
-    path.write_text(text)
-
-
 def main(argv=None) -> int:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from bench import machine  # tools/bench.py: CPU model, cores, OS
+    from bench import gpu_name, machine, replace_block  # tools/bench.py
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--arch", default="cuda", choices=["cpu", "cuda"])
@@ -192,7 +171,7 @@ def main(argv=None) -> int:
         for row in pool.map(go, second):
             rows[row["name"]] = row
     ordered = [rows[r[0]] for r in runs if r[0] in rows and r[0] in by_name]
-    info = {"device": device_name(args.arch), "machine": machine(), "jobs": args.jobs,
+    info = {"device": (gpu_name() or "CUDA GPU") if args.arch == "cuda" else "CPU", "machine": machine(), "jobs": args.jobs,
             "date": time.strftime("%Y-%m-%d"), "python": platform.python_version(),
             "args": " ".join(argv if argv is not None else sys.argv[1:])}
     table = markdown(ordered, info)
@@ -200,7 +179,7 @@ def main(argv=None) -> int:
     if args.json:
         args.json.write_text(json.dumps({"info": info, "rows": ordered}, indent=2))
     if args.report:
-        write_report(args.report, table)
+        replace_block(args.report, BEGIN, END, table)
     return 1 if any(r["rc"] != 0 for r in ordered) else 0
 
 
