@@ -45,8 +45,8 @@ def _largest_differences(a, b):
     with RunFile(a) as fa, RunFile(b) as fb:
         assert fa.n_frames == fb.n_frames
         for i in range(fa.n_frames):
-            for name in out:
-                out[name] = max(out[name], float(np.abs(fa.field(name, i) - fb.field(name, i)).max()))
+            for name, largest in out.items():
+                out[name] = max(largest, float(np.abs(fa.field(name, i) - fb.field(name, i)).max()))
     return out
 
 
@@ -143,6 +143,6 @@ print(it, res, ok, np.linalg.norm(x - ref) / np.linalg.norm(ref))
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=cli_env(), capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0, r.stderr
-    it, res, ok, err = r.stdout.split()[-4:]
+    _it, _res, ok, err = r.stdout.split()[-4:]
     assert ok == "True", r.stdout
     assert float(err) < (1e-7 if precision == "f64" else 1e-4), r.stdout

@@ -187,8 +187,8 @@ def main(argv=None) -> int:
                     rows.append(r)
                     print(json.dumps(r), flush=True)
     lines = [f"Arch {args.arch}; copy kernel: " + ", ".join(f"{p} {v / 1e9:.0f} GB/s" for p, v in copy.items()), "",
-             "| lattice | rows | entries/row | precision | layout | reduction | ms / iteration | MB / iteration | GB/s "
-             "| of copy |",
+             ("| lattice | rows | entries/row | precision | layout | reduction | ms / iteration | MB / iteration "
+              "| GB/s | of copy |"),
              "|---|---:|---:|---|---|---|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['case']} | {r['rows']} | {r['nnz_per_row'] + 1:.1f} | {r['precision']} | {r['layout']} | "

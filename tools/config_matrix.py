@@ -118,8 +118,8 @@ def markdown(rows, info) -> str:
                                                                 "of other runs overlap)" if info["jobs"] > 1 else "")
          + "."),
         "",
-        "| run | config | variant | end_time s | arch | precision | exit | status | particles | steps | "
-        "process s | step loop s | M particle-steps/s |",
+        ("| run | config | variant | end_time s | arch | precision | exit | status | particles | steps | "
+         "process s | step loop s | M particle-steps/s |"),
         "|---|---|---|---:|---|---|---:|---|---:|---:|---:|---:|---:|",
     ]
     for r in rows:

@@ -27,8 +27,8 @@ PY = sys.executable
 
 #: name -> (budget in seconds, command (OUT is replaced by the output folder))
 CHECKS = {
-    "start": (60, [PY, "-c", "import taichi as ti; ti.init(arch=ti.cuda); "
-                             "assert ti.lang.impl.current_cfg().arch == ti.cuda; print('cuda ok')"]),
+    "start": (60, [PY, "-c", ("import taichi as ti; ti.init(arch=ti.cuda); "
+                              "assert ti.lang.impl.current_cfg().arch == ti.cuda; print('cuda ok')")]),
     "tests": (240, [PY, "-m", "pytest", "-q", "-m", "cuda", "tests/test_cuda.py", "-p", "no:cacheprovider"]),
     "parity": (240, [PY, "tools/parity.py", "--out-dir", "OUT/parity", "--json", "OUT/parity.json"]),
     "configs": (420, [PY, "tools/config_matrix.py", "--arch", "cuda", "--timeout", "120", "--out-dir", "OUT/configs",
