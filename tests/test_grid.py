@@ -270,3 +270,56 @@ def test_radius_larger_than_cell_rejected(ti_cpu):
     grid.sort(x, act, n)
     with pytest.raises(ValueError, match="cell size"):
         grid.build_neighbour_lists(x, msk, n, CELL * 1.01)
+
+
+def test_blocked_scan_gives_the_serial_sort(ti_cpu, monkeypatch):
+    """The blocked prefix sum (the GPU's, forced here on the CPU) gives the cells' starts and the sort's
+    permutation of the serial one, integer for integer."""
+    from taichi_sph.sph import scan
+
+    dim, n = 3, 4000
+    lo, hi, pos, active, mask = make_case(dim, n, n, seed=11)
+    out = []
+    for blocked in (False, True):
+        monkeypatch.setattr(scan, "_is_cpu", lambda b=blocked: not b)
+        x, act, _, _ = make_fields(dim, n, pos, active, mask)
+        grid = NeighbourGrid(n, dim, lo, hi, CELL, max_neighbours=400)
+        assert grid._scan.blocked == blocked
+        left = grid.sort(x, act, n)
+        out.append((grid.perm.to_numpy().copy(), grid.cell_start.to_numpy().copy(), left))
+    for a, b in zip(*out):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("n", [0, 1, 127, 128, 129, 1000, 4097])
+def test_prefix_sum_against_numpy(ti_cpu, n):
+    """Both forms of PrefixSum against numpy's cumulative sum, at block edges (the block is 128 here) and for
+    no counts at all; the copy receives the same values."""
+    from taichi_sph.sph.scan import PrefixSum
+
+    cap = 4097
+    count = ti.field(ti.i32, cap)
+    rng = np.random.default_rng(n)
+    counts = rng.integers(0, 9, cap).astype(np.int32)
+    count.from_numpy(counts)
+    want = np.concatenate([[0], np.cumsum(counts[:n])])
+    for blocked in (False, True):
+        ps = PrefixSum(cap, blocked=blocked)
+        start = ti.field(ti.i32, cap + 1)
+        copy = ti.field(ti.i32, cap + 1)
+
+        @ti.kernel
+        def run(m: ti.i32):
+            ps.exclusive_with_copy(count, start, m, copy)
+
+        run(n)
+        np.testing.assert_array_equal(start.to_numpy()[: n + 1], want)
+        np.testing.assert_array_equal(copy.to_numpy()[: n + 1], want)
+        alone = ti.field(ti.i32, cap + 1)
+
+        @ti.kernel
+        def run_alone(m: ti.i32):
+            ps.exclusive(count, alone, m)
+
+        run_alone(n)
+        np.testing.assert_array_equal(alone.to_numpy()[: n + 1], want)

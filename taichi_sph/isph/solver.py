@@ -36,6 +36,7 @@ from ..linalg.sparse_cg import SparseCGSolver
 from ..scene import WALL, WATER
 from ..sph import kernels, operators, walls
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError
+from ..sph.scan import PrefixSum
 from ..sph.solver_common import SolverCommon
 from ..sph.wall_motion import WallMotion
 from . import porosity as _porosity
@@ -160,6 +161,9 @@ class ISPHSolver(SolverCommon):
         self.isolated = ti.field(ti.i32, n)
         self.solve_mask = ti.field(ti.i32, n)
         self.row = ti.field(ti.i32, n)
+        self._row_scan = PrefixSum(n)
+        self.row_flag = ti.field(ti.i32, n if self._row_scan.blocked else 1)
+        self.row_start = ti.field(ti.i32, n + 1 if self._row_scan.blocked else 1)
         self.b = ti.field(float, max(self.n_water, 1))
         self.psol = ti.field(float, max(self.n_water, 1))
         self.triplets = ti.field(ti.i32, ())
@@ -263,17 +267,30 @@ class ISPHSolver(SolverCommon):
     # ------------------------------------------------------------------ kernels
     @ti.kernel
     def _k_rows(self):
-        """Row numbering of the PPE (water particles in current order) and the neighbour-list mask."""
-        ti.loop_config(serialize=True)
-        c = 0
-        for i in range(self.n):
-            self.row[i] = -1
-            self.solve_mask[i] = 0
-            if self.kind[i] == WATER:
-                self.row[i] = c
-                c += 1
-                if self.active[i] == 1:
-                    self.solve_mask[i] = 1
+        """Row numbering of the PPE (water particles in current order) and the neighbour-list mask. A running
+        count on the CPU; on GPUs a blocked prefix sum of the water flags (sph/scan.py), the same numbers."""
+        if ti.static(self._row_scan.blocked):
+            for i in range(self.n):
+                self.row_flag[i] = 1 if self.kind[i] == WATER else 0
+            self._row_scan.exclusive(self.row_flag, self.row_start, self.n)
+            for i in range(self.n):
+                self.row[i] = -1
+                self.solve_mask[i] = 0
+                if self.kind[i] == WATER:
+                    self.row[i] = self.row_start[i]
+                    if self.active[i] == 1:
+                        self.solve_mask[i] = 1
+        else:
+            ti.loop_config(serialize=True)
+            c = 0
+            for i in range(self.n):
+                self.row[i] = -1
+                self.solve_mask[i] = 0
+                if self.kind[i] == WATER:
+                    self.row[i] = c
+                    c += 1
+                    if self.active[i] == 1:
+                        self.solve_mask[i] = 1
 
     @ti.kernel
     def _k_wet(self):

@@ -62,6 +62,7 @@ import time
 import numpy as np
 import taichi as ti
 
+from ..sph.scan import PrefixSum
 from .ell_pcg import EllPCG
 
 #: factor on the coarse-grid correction of every level (see the module docstring)
@@ -147,6 +148,7 @@ class MGPCG(EllPCG):
             n_par += 1
         self.n_par = n_par
         self._serial_scatter = _is_cpu_arch(ti.lang.impl.current_cfg().arch)
+        self._cell_scan = PrefixSum(n1)
         self._fresh = True
         self.last_setup_seconds = 0.0
 
@@ -300,13 +302,7 @@ class MGPCG(EllPCG):
             if c < 0:
                 c = n1
             ti.atomic_add(self.ccount[c], 1)
-        ti.loop_config(serialize=True)
-        for c in range(n1 + 1):
-            s = 0
-            if c > 0:
-                s = self.cstart[c - 1] + self.ccount[c - 1]
-            self.cstart[c] = s
-            self.cursor[c] = s
+        self._cell_scan.exclusive_with_copy(self.ccount, self.cstart, n1, self.cursor)
         if ti.static(self._serial_scatter):
             ti.loop_config(serialize=True)
         for i in range(n):

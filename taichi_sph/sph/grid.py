@@ -9,8 +9,8 @@ box and returns their indices.
 
 On CPU the scan and the scatter run serially (``ti.loop_config(serialize=True)``): within a cell the
 particles keep ascending original index, so `perm` is deterministic. On GPU the scatter is atomic and
-the order inside a cell may vary from run to run. The scan is serial on every backend (one pass over
-the cells).
+the order inside a cell may vary from run to run. The scan over the cells is serial on the CPU and
+blocked on GPUs (scan.py).
 
 `sort()` only computes `perm`; `reorder()` applies it to any per-particle field. After sorting and
 reordering positions, `build_neighbour_lists()` writes an explicit neighbour list per particle by
@@ -33,6 +33,7 @@ import numpy as np
 import taichi as ti
 
 from .operators import rel, wrap
+from .scan import PrefixSum
 
 
 class NeighbourOverflowError(RuntimeError):
@@ -113,6 +114,7 @@ class NeighbourGrid:
         self._left = ti.field(ti.i8, self.capacity)  # 1 if deactivated by the last sort()
         self._count = ti.field(ti.i32, self.num_cells + 1)
         self._cursor = ti.field(ti.i32, self.num_cells + 1)
+        self._scan = PrefixSum(self.num_cells)
         self._raw_count = ti.field(ti.i32, self.capacity)  # true neighbour count, not clamped
         self._ovf_max = ti.field(ti.i32, ())
         self._ovf_rows = ti.field(ti.i32, ())
@@ -161,15 +163,7 @@ class NeighbourGrid:
 
     @ti.kernel
     def _scan_scatter(self, n: ti.i32):
-        ti.loop_config(serialize=True)
-        for c in range(self.num_cells + 1):
-            if c == 0:
-                self.cell_start[0] = 0
-                self._cursor[0] = 0
-            else:
-                s = self.cell_start[c - 1] + self._count[c - 1]
-                self.cell_start[c] = s
-                self._cursor[c] = s
+        self._scan.exclusive_with_copy(self._count, self.cell_start, ti.static(self.num_cells), self._cursor)
         if ti.static(self._serial):
             ti.loop_config(serialize=True)
             for i in range(n):

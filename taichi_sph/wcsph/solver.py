@@ -47,6 +47,7 @@ from ..contract import DT_CFL, DT_FORCE, DT_VISCOUS
 from ..scene import AIR, SOIL, WALL, WATER
 from ..sph import kernels, operators, walls
 from ..sph.grid import NeighbourGrid, NeighbourOverflowError, _is_cpu_arch
+from ..sph.scan import PrefixSum
 from ..sph.solver_common import SolverCommon
 from ..sph.wall_motion import WallMotion
 from ..switches import Switches
@@ -218,6 +219,9 @@ class WCSPHSolver(SolverCommon):
         # docs/performance_wcsph.md)
         self.deal = deal_threads(self.has_soil, self.serial)
         self.moving_tmp = ti.field(ti.i32, n if self.deal > 1 else 1)
+        self._moving_scan = PrefixSum(n)
+        self.moving_flag = ti.field(ti.i32, n if self._moving_scan.blocked else 1)
+        self.moving_start = ti.field(ti.i32, n + 1 if self._moving_scan.blocked else 1)
         self.group = ti.field(ti.i32, n if self.has_soil else 1)  # the list order of a neighbour (_k_mask)
         self.particle_fields = [self.x, self.v, self.a, self.xs, self.rate, self.normal, self.rho, self.p,
                                 self.h, self.m, self.wdepth, self.kind, self.ids, self.active]
@@ -433,13 +437,23 @@ class WCSPHSolver(SolverCommon):
         `deal` threads, the chunks of DEAL_CHUNK of that order dealt to the threads by a hash of the chunk's
         index, thread t's chunks forming the t-th block of the list (about the block Taichi's CPU backend
         gives that thread)."""
-        self.n_moving[None] = 0
-        ti.loop_config(serialize=True)
-        for i in range(self.n):
-            if self.fmask[i] >= 1:
-                k = self.n_moving[None]
-                self.moving_ids[k] = i
-                self.n_moving[None] = k + 1
+        if ti.static(self._moving_scan.blocked):
+            # GPUs: a blocked prefix sum of the flags (sph/scan.py) instead of one thread's running count
+            for i in range(self.n):
+                self.moving_flag[i] = 1 if self.fmask[i] >= 1 else 0
+            self._moving_scan.exclusive(self.moving_flag, self.moving_start, self.n)
+            for i in range(self.n):
+                if self.fmask[i] >= 1:
+                    self.moving_ids[self.moving_start[i]] = i
+            self.n_moving[None] = self.moving_start[self.n]
+        else:
+            self.n_moving[None] = 0
+            ti.loop_config(serialize=True)
+            for i in range(self.n):
+                if self.fmask[i] >= 1:
+                    k = self.n_moving[None]
+                    self.moving_ids[k] = i
+                    self.n_moving[None] = k + 1
         if ti.static(self.deal > 1):
             nm = self.n_moving[None]
             nch = (nm + DEAL_CHUNK - 1) // DEAL_CHUNK
