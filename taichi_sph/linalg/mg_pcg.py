@@ -46,9 +46,10 @@ takes the level as a runtime argument, so each compiles once whatever the number
 kernel unrolled over levels and stencil slots took minutes to compile). In the V-cycle the two
 pre-smoothing sweeps from zero are one loop (x = w (2 r - A (w r))), the residual is formed inside
 the restriction and the prolongation inside the first post-smoothing sweep, so a level costs four
-loops with five matrix-vector products in all. Levels of fewer than SERIAL_BELOW cells run together
-in one serial kernel (on a CPU a parallel loop costs tens of microseconds to dispatch, more than
-their work), the others one parallel kernel per level and direction. One CG iteration is then
+loops with five matrix-vector products in all. On a CPU, levels of fewer than SERIAL_BELOW cells run
+together in one serial kernel (a parallel loop costs tens of microseconds to dispatch there, more than
+their work), the others one parallel kernel per level and direction; on a GPU every level but the
+coarsest runs parallel (one GPU thread is slow, a launch cheap). One CG iteration is then
 the V-cycle's kernels (z = B r; r.z and beta stay on the device) and `EllPCG._k_iterate` without its
 Jacobi step (p = z + beta p, A p with p.Ap, x and r updates, |r|^2 returned to the host).
 The hierarchy is rebuilt in every solve (`_prepare`): rows binned by cell (a counting sort, serial on
@@ -142,12 +143,14 @@ class MGPCG(EllPCG):
         self.u0 = ti.field(fp, self.n_max)
         self.far_pairs = ti.field(ti.i32, ())
         self.agg.fill(-1)
-        # cell levels 0 .. n_par - 1 run as parallel kernels, the rest (always the coarsest) in one serial one
+        # cell levels 0 .. n_par - 1 run as parallel kernels, the rest (always the coarsest) in one serial one;
+        # on a GPU, where a launch costs microseconds and one thread is slow, only the coarsest is serial
+        cpu = _is_cpu_arch(ti.lang.impl.current_cfg().arch)
         n_par = 0
-        while n_par < self.m - 1 and self.ncells[n_par] >= SERIAL_BELOW:
+        while n_par < self.m - 1 and (self.ncells[n_par] >= SERIAL_BELOW or not cpu):
             n_par += 1
         self.n_par = n_par
-        self._serial_scatter = _is_cpu_arch(ti.lang.impl.current_cfg().arch)
+        self._serial_scatter = cpu
         self._cell_scan = PrefixSum(n1)
         self._fresh = True
         self.last_setup_seconds = 0.0

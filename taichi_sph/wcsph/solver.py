@@ -178,8 +178,10 @@ class WCSPHSolver(SolverCommon):
         self.ns = 2 * dim + 3 + (1 if self.variable_h else 0)
         self.Q_RHO, self.Q_PR, self.Q_H = 0, 1, 2
         self.nq = 3 if self.variable_h else 2
-        # small scenes run their loops serially: a parallel loop costs ~50 us of thread dispatch
-        self.serial = self.n_fluid + self.n_soil < (SERIAL_BELOW_SOIL if self.n_soil else SERIAL_BELOW)
+        # small scenes run their loops serially on the CPU: a parallel loop costs ~50 us of thread dispatch
+        # there (never on a GPU, where a serial loop runs on one slow thread)
+        self.serial = _is_cpu_arch(ti.lang.impl.current_cfg().arch) and (
+            self.n_fluid + self.n_soil < (SERIAL_BELOW_SOIL if self.n_soil else SERIAL_BELOW))
 
         vec = ti.Vector.field
         self.s = vec(self.ns, float, n)
