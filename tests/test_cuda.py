@@ -146,3 +146,35 @@ print(it, res, ok, np.linalg.norm(x - ref) / np.linalg.norm(ref))
     _it, _res, ok, err = r.stdout.split()[-4:]
     assert ok == "True", r.stdout
     assert float(err) < (1e-7 if precision == "f64" else 1e-4), r.stdout
+
+
+def test_gpu_paths_are_chosen_on_cuda():
+    """On CUDA the GPU forms are the ones compiled (docs/performance.md, "GPU"): no scene runs its loops
+    serially, the prefix sums are blocked, and the PPE's f64 dot products are summed in two stages; and a
+    short step of each mode runs with them."""
+    code = """
+import taichi as ti
+ti.init(arch=ti.cuda, default_fp=ti.f32, log_level=ti.ERROR)
+assert ti.lang.impl.current_cfg().arch == ti.cuda
+from taichi_sph.config import load_config
+from taichi_sph.scene import build_scene
+from taichi_sph.solvers import make_solver
+base = {"dim": 2, "dx": 0.01, "end_time": 1.0, "tank": {"size": [0.3, 0.2]},
+        "water": [{"min": [0, 0], "max": [0.1, 0.15]}]}
+cfg = load_config(data=dict(base, mode="wcsph_biot", dt="auto"))
+w = make_solver(cfg, build_scene(cfg))
+assert not w.serial and w.grid._scan.blocked and w._moving_scan.blocked
+w.initial_diagnostics()
+w.step(w.propose_dt()[0])
+cfg = load_config(data=dict(base, mode="isph", dt=0.002, isph={"ppe": {"type": "mg_pcg"}}))
+s = make_solver(cfg, build_scene(cfg))
+assert s.grid._scan.blocked and s._row_scan.blocked and s.ppe._cell_scan.blocked
+assert s.ppe.reduction == "two_stage" and s.ppe.n_par == s.ppe.m - 1
+s.initial_diagnostics()
+s.step(0.002)
+print("gpu paths ok")
+"""
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=cli_env(), capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert "gpu paths ok" in r.stdout
