@@ -7,9 +7,10 @@ with `--arch cuda` (tools/config_matrix.py); the PPE iteration's bandwidth, both
 (its process group killed) and the next one starts; each writes its log and report into OUT.
 
     python tools/gpu_check.py --out DIR [--only tests parity configs bandwidth freefall bench bench3d]
-        [--scale 1.0]
+        [--scale 1.0] [--arch cpu]
 
-`--scale` multiplies every budget. Prints one line per check (exit status, seconds) and writes
+`--scale` multiplies every budget. `--arch cpu` runs the same sequence on the CPU (a dry run of the
+tool itself: the `cuda` tests skip, parity compares the CPU with itself). Prints one line per check (exit status, seconds) and writes
 DIR/summary.txt. Exits 1 when a check fails or overruns.
 """
 
@@ -30,10 +31,10 @@ CHECKS = {
     "start": (60, [PY, "-c", ("import taichi as ti; ti.init(arch=ti.cuda); "
                               "assert ti.lang.impl.current_cfg().arch == ti.cuda; print('cuda ok')")]),
     "tests": (240, [PY, "-m", "pytest", "-q", "-m", "cuda", "tests/test_cuda.py", "-p", "no:cacheprovider"]),
-    "parity": (240, [PY, "tools/parity.py", "--out-dir", "OUT/parity", "--json", "OUT/parity.json"]),
+    "parity": (240, [PY, "tools/parity.py", "--against", "cuda", "--out-dir", "OUT/parity", "--json", "OUT/parity.json"]),
     "configs": (420, [PY, "tools/config_matrix.py", "--arch", "cuda", "--timeout", "120", "--out-dir", "OUT/configs",
                       "--json", "OUT/configs.json", "--report", "OUT/performance.md"]),
-    "bandwidth": (120, [PY, "tools/bench_ppe_bandwidth.py", "--sizes", "2d1m", "2d4m", "3d1m", "--iterations", "100",
+    "bandwidth": (120, [PY, "tools/bench_ppe_bandwidth.py", "--arch", "cuda", "--sizes", "2d1m", "2d4m", "3d1m", "--iterations", "100",
                         "--reductions", "atomic", "two_stage", "--json", "OUT/bandwidth.json"]),
     "freefall": (120, [PY, "-m", "taichi_sph.cli", "--config", "configs/freefall.yaml", "--arch", "cuda",
                        "--out", "OUT/freefall.h5", "-q"]),
@@ -45,8 +46,12 @@ CHECKS = {
 }
 
 
-def run_check(name: str, budget: float, cmd: list, out: Path) -> tuple[int, float]:
+def run_check(name: str, budget: float, cmd: list, out: Path, arch: str = "cuda") -> tuple[int, float]:
     cmd = [str(out) + c[3:] if c.startswith("OUT") else c for c in cmd]
+    if arch != "cuda":
+        cmd = [c.replace("ti.cuda", f"ti.{arch}") for c in cmd]
+        cmd = [arch if c == "cuda" and k > 0 and cmd[k - 1] in ("--arch", "--against") else c
+               for k, c in enumerate(cmd)]
     env = dict(os.environ, TAICHI_SPH_PROGRESS="0", TI_LOG_LEVEL="warn", PYTHONUNBUFFERED="1",
                PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     t0 = time.perf_counter()
@@ -67,6 +72,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--only", nargs="+", choices=list(CHECKS))
     ap.add_argument("--scale", type=float, default=1.0, help="multiplies every budget")
+    ap.add_argument("--arch", default="cuda", choices=["cuda", "cpu"], help="cpu: a dry run of the tool")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     perf = args.out / "performance.md"
@@ -79,7 +85,7 @@ def main(argv=None) -> int:
     for name, (budget, cmd) in CHECKS.items():
         if args.only and name not in args.only and name != "start":
             continue
-        rc, seconds = run_check(name, budget * args.scale, cmd, args.out)
+        rc, seconds = run_check(name, budget * args.scale, cmd, args.out, args.arch)
         line = f"{name:10s} exit {rc:3d}  {seconds:6.1f} s  (budget {budget * args.scale:.0f} s)"
         print(line, flush=True)
         lines.append(line)
