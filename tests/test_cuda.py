@@ -55,9 +55,10 @@ def test_hydrostatic_tank_on_cuda(tmp_path):
 
     Physical reference, as tests/test_isph_free_water.py: the floor pressure within 2 % of rho g H (the
     O(dx / H) surface-position error of a particle method, halved by the half-layer surface pressure).
-    Against the CPU: the PPE stops at a relative residual of 1e-8 on each backend, from sums taken in
-    another order, so pressures may differ by about 1e-8 of rho g H per step and positions by far less
-    than a spacing; 1e-6 rho g H and 1e-6 dx bound that with room for 200 steps of it."""
+    Against the CPU: each backend's PPE stops at a relative residual of 1e-8 from sums taken in another
+    order, and a solve is within cond(A) x 1e-8 of the exact pressure, cond(A) ~ 1e3 for this tank of 20 x
+    15 particles: pressures may differ by ~1e-5 rho g H (bound 2e-5). Such a pressure-gradient difference,
+    1e-5 g, moves a particle by 1e-5 g t^2 / 2 = 2e-7 m = 1e-5 dx over the 0.2 s (bound 1e-4 dx)."""
     H = 0.30
     sets = ("dx=0.02", "end_time=0.2", "output.every=0.05")
     cpu = _run("hydrostatic.yaml", "cpu", tmp_path / "cpu.h5", *sets)
@@ -72,8 +73,8 @@ def test_hydrostatic_tank_on_cuda(tmp_path):
         assert abs(p_floor / (RHO * G * H) - 1) < 0.02
         dx = rf.dx
     d = _largest_differences(cpu, gpu)
-    assert d["pressure"] < 1e-6 * RHO * G * H, d
-    assert d["position"] < 1e-6 * dx, d
+    assert d["pressure"] < 2e-5 * RHO * G * H, d
+    assert d["position"] < 1e-4 * dx, d
 
 
 def test_wcsph_dambreak_on_cuda(tmp_path):

@@ -51,15 +51,17 @@ CASES = {
     "consolidation": ("consolidation", None, ["end_time=0.05", "output.every=0.005"], 0.2, "fields", None),
 }
 
-#: the largest difference accepted, per comparison. Fields: the two backends sum in another order (atomic
-#: adds and reductions on the GPU), and the PPE stops at a relative residual of 1e-8 to 1e-6, so pressures
-#: may differ by that tolerance of their scale and positions by its effect over the run's steps; 1e-6 dx and
-#: 1e-5 rho_w g H leave room for that and nothing a wrong kernel would give. Statistics: a dam break's
+#: the largest difference accepted, per comparison (first bounds, not yet set against a GPU's measured
+#: differences). Fields: the two backends sum in another order (atomic adds and reductions on the GPU), and
+#: an isph PPE solve that stops at a relative residual of 1e-8 is within cond(A) x 1e-8 ~ 1e-5 of the exact
+#: pressure (cond ~ 1e3 for these tanks); that difference in the pressure gradient, 1e-5 g, moves a particle
+#: by 1e-5 g t^2 / 2 ~ 1e-5 dx over these runs. 1e-4 dx and 2e-5 rho_w g H hold that and nothing a wrong
+#: kernel would give. Statistics: a dam break's
 #: particle paths diverge, but its front and centroid are set by the flow, not by which particle leads:
 #: half a particle spacing and 1 % of the kinetic energy are below what a changed scheme moves (the
 #: dam-break front moves by a spacing between dx and dx/2) and above round-off growth.
 TOLERANCES = {
-    "fields": {"position_dx": 1e-6, "velocity_sqrt_gH": 1e-5, "pressure_rho_g_H": 1e-5},
+    "fields": {"position_dx": 1e-4, "velocity_sqrt_gH": 1e-4, "pressure_rho_g_H": 2e-5},
     "statistics": {"centroid_dx": 0.5, "front_dx": 0.5, "kinetic_energy_rel": 0.01, "volume_rel": 0.002},
 }
 
