@@ -352,3 +352,18 @@ def test_config_doc_is_current():
 
     r = subprocess.run([sys.executable, "tools/config_doc.py", "--check"], cwd=ROOT, capture_output=True, text=True)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_sparse_cg_off_the_cpu_is_refused_before_the_run():
+    """isph.ppe.type sparse_cg is f32 and unpreconditioned off the CPU (Taichi 1.7.4): a tolerance below
+    f32's reach is refused with a line naming the key; on the CPU, and with a reachable tolerance, it is
+    taken (tests/test_cuda.py runs the refusal through the CLI on a GPU)."""
+    from taichi_sph.config.isph import PPESolver
+    from taichi_sph.errors import InputError
+    from taichi_sph.isph.solver import check_sparse_cg_backend
+
+    strict = PPESolver(type="sparse_cg", tolerance=1e-8)
+    with pytest.raises(InputError, match="isph.ppe.tolerance"):
+        check_sparse_cg_backend(strict, cpu=False)
+    check_sparse_cg_backend(strict, cpu=True)
+    check_sparse_cg_backend(PPESolver(type="sparse_cg", tolerance=1e-4), cpu=False)

@@ -179,3 +179,14 @@ print("gpu paths ok")
                        timeout=600)
     assert r.returncode == 0, r.stderr
     assert "gpu paths ok" in r.stdout
+
+
+def test_sparse_cg_on_cuda_is_refused_with_exit_2(tmp_path):
+    """sparse_cg on CUDA cannot reach the default tolerance: one line naming the key, exit 2, no run file."""
+    out = tmp_path / "s.h5"
+    cmd = [sys.executable, "-m", "taichi_sph.cli", "--config", str(ROOT / "configs" / "hydrostatic.yaml"), "--arch",
+           "cuda", "--out", str(out), "-q", "--set", "isph.ppe.type=sparse_cg"]
+    r = subprocess.run(cmd, cwd=ROOT, env=cli_env(), capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2, r.stderr
+    assert "isph.ppe.tolerance" in r.stderr.strip().splitlines()[-1]
+    assert not out.exists()

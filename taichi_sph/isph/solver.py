@@ -29,7 +29,7 @@ import taichi as ti
 
 from .. import guard
 from ..backend import is_f64
-from ..errors import InstabilityError
+from ..errors import InputError, InstabilityError
 from ..linalg.ell_pcg import EllOverflowError, EllPCG
 from ..linalg.mg_pcg import MGPCG
 from ..linalg.sparse_cg import SparseCGSolver
@@ -242,6 +242,7 @@ class ISPHSolver(SolverCommon):
             self.b = self.ppe.b
             self.psol = self.ppe.x
         else:
+            check_sparse_cg_backend(cfg.isph.ppe, ti.lang.impl.current_cfg().arch in (ti.x64, ti.arm64))
             self.ppe = SparseCGSolver(max(self.n_water, 1), max(self.n_water, 1) * (self.max_nb + 1), fp,
                                       cfg.isph.ppe.tolerance, cfg.isph.ppe.max_iterations)
         self.dirichlet_scale = self._lattice_laplacian_sum()
@@ -1254,6 +1255,18 @@ def ppe_width(cfg) -> int:
         return int(cfg.isph.ppe.width)
     lattice = kernels.lattice_sums(cfg.dim)["neighbours"]
     return min(int(math.ceil(1.5 * lattice)), cfg.max_neighbours())
+
+
+def check_sparse_cg_backend(ppe_cfg, cpu: bool) -> None:
+    """isph.ppe.type sparse_cg off the CPU: Taichi 1.7.4's sparse matrices are f32 there and its SparseCG
+    has no preconditioner, so a tolerance below what f32 CG reaches is refused before the run starts
+    (InputError naming the key) rather than failing at the first solve."""
+    from ..config.schema import F32_PPE_TOLERANCE
+
+    if not cpu and ppe_cfg.tolerance < F32_PPE_TOLERANCE:
+        raise InputError(f"isph.ppe.type: sparse_cg off the CPU solves in f32 without a preconditioner and cannot "
+                         f"reach isph.ppe.tolerance {ppe_cfg.tolerance:g} (below {F32_PPE_TOLERANCE:g}); "
+                         f"use ell_pcg or mg_pcg on a GPU")
 
 
 def ppe_precision(ppe_cfg, runtime_fp):
