@@ -46,8 +46,15 @@ log = logging.getLogger("taichi_sph")
 
 GRAD_CORRECTED, GRAD_DIFFERENCE, GRAD_SYMMETRIC = 0, 1, 2
 #: sweeps of the lowest index through the water pairs per step (_closed_bodies): a body up to this many
-#: pair hops across is found whole (a pair hop is up to r_e = 2.4 dx)
+#: pair hops across is found whole (a pair hop is up to BODY_LINK r_e)
 BODY_SWEEPS = 6
+#: two water particles belong to one body (_closed_bodies) when closer than this fraction of r_e. Beyond
+#: it the pair's PPE coefficient (-dW/dr r / (r^2 + eta^2)) is below 2.2 % of its value at r = h: a cluster
+#: of pore water joined to the rest only by such pairs has a PPE block of its own in all but name, with
+#: no reference pressure. In the porous dam break at dx 5 mm such clusters of 2-4 particles in the dam,
+#: joined by one pair at 0.97-0.98 r_e (a coefficient 1e-3 of the block's), were solved to 1e6-3e8 Pa
+#: and thrown at 100-180 m/s (docs/isph.md, "Porous dam break")
+BODY_LINK = 0.9
 #: most re-solves of the PPE per step after freeing water held in tension (_k_tension)
 TENSION_PASSES = 3
 #: inside saturated ground the kernel-gradient correction is kept where the implicit drag D = 1 + c (a + b |v|)
@@ -477,9 +484,10 @@ class ISPHSolver(SolverCommon):
 
     @ti.func
     def _water_pair(self, i, j) -> ti.i32:
+        """Whether i and j are water of one body: both solved, closer than BODY_LINK r_e."""
         ok = 0
         if self.kind[j] == WATER and self.solve_mask[j] == 1 and j != i:
-            if operators.rel(self.x[i], self.x[j], self.period).norm() < self.re:
+            if operators.rel(self.x[i], self.x[j], self.period).norm() < BODY_LINK * self.re:
                 ok = 1
         return ok
 
