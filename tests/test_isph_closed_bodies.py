@@ -93,3 +93,25 @@ def test_a_drop_joined_only_at_the_support_edge_is_a_body_of_its_own(ti_cpu):
         assert drop.sum() == 4
         assert int(solver.closed_bodies[None]) == closed, gap
         assert np.all(solver.free.to_numpy()[drop] == closed), gap
+
+
+def test_sparse_pore_lattice_is_not_split_into_bodies(ti_cpu):
+    """Ground of eps 0.18 (2D; its pore lattice's neighbours at 2.22-2.5 dx, beyond BODY_LINK r_e = 2.16 dx)
+    saturated under a pool: lattice neighbours join within LATTICE_LINK spacings (up to r_e), so the
+    closed-body rule closes what it closed when every pair within r_e joined, the 2 pore particles with no
+    water within r_e (measured: 2 with either rule). With the lattice rule off, every pore particle was a
+    body of its own: 20 closed."""
+    from taichi_sph.config import load_config
+    from taichi_sph.isph.solver import ISPHSolver
+    from taichi_sph.scene import build_scene
+
+    cfg = load_config(data={
+        "mode": "isph", "dim": 2, "dx": DX, "end_time": 0.01, "dt": 0.001,
+        "tank": {"size": [0.2, 0.2], "boundary": "slip"},
+        "soil": {"regions": [{"min": [0.0, 0.0], "max": [0.2, 0.1], "eps0": 0.18, "d50": 0.01}]},
+        "water": [{"min": [0.0, 0.0], "max": [0.2, 0.1], "porosity": 0.18},
+                  {"min": [0.0, 0.1], "max": [0.2, 0.15]}]})
+    solver = ISPHSolver(cfg, build_scene(cfg))
+    solver.initial_diagnostics()
+    solver.step(0.001)
+    assert int(solver.closed_bodies[None]) <= 2

@@ -55,6 +55,10 @@ BODY_SWEEPS = 6
 #: joined by one pair at 0.97-0.98 r_e (a coefficient 1e-3 of the block's), were solved to 1e6-3e8 Pa
 #: and thrown at 100-180 m/s (docs/isph.md, "Porous dam break")
 BODY_LINK = 0.9
+#: ... unless the pore lattice is sparser: neighbours on a pore lattice of spacing dx eps^(-1/dim) always
+#: join (the pairs within LATTICE_LINK spacings), or ground of eps below (LATTICE_LINK / (BODY_LINK 2.4))^dim
+#: would break into one-particle bodies, all made free surface
+LATTICE_LINK = 1.05
 #: most re-solves of the PPE per step after freeing water held in tension (_k_tension)
 TENSION_PASSES = 3
 #: inside saturated ground the kernel-gradient correction is kept where the implicit drag D = 1 + c (a + b |v|)
@@ -484,10 +488,16 @@ class ISPHSolver(SolverCommon):
 
     @ti.func
     def _water_pair(self, i, j) -> ti.i32:
-        """Whether i and j are water of one body: both solved, closer than BODY_LINK r_e."""
+        """Whether i and j are water of one body: both solved, closer than BODY_LINK r_e, or than
+        LATTICE_LINK pore-lattice spacings dx eps^(-1/dim) of the sparser of the two where that is farther
+        (ground of eps below ~0.24 in 2D, ~0.11 in 3D, whose lattice neighbours lie beyond BODY_LINK r_e),
+        never beyond r_e."""
         ok = 0
         if self.kind[j] == WATER and self.solve_mask[j] == 1 and j != i:
-            if operators.rel(self.x[i], self.x[j], self.period).norm() < BODY_LINK * self.re:
+            eps = ti.min(self.eps[i], self.eps[j])
+            link = ti.min(ti.max(BODY_LINK * self.re, LATTICE_LINK * self.dx * ti.pow(eps, -1.0 / self.dim)),
+                          self.re)
+            if operators.rel(self.x[i], self.x[j], self.period).norm() < link:
                 ok = 1
         return ok
 
