@@ -4,7 +4,7 @@ Each test runs the CLI with `--arch cuda` (a subprocess: the in-process runtime 
 the CPU's) and checks the result against the physical reference its CPU test uses, and against the same
 run on the CPU at the same precision. CPU and CUDA differ only by the order of floating-point sums
 (atomic adds and parallel reductions on the GPU); tools/parity.py makes the same comparison on longer
-runs and docs/performance.md gives its measured differences.
+runs. The bounds below are reasoned, not yet measured on a GPU (docs/performance.md, "GPU").
 
     python -m pytest -m cuda tests/test_cuda.py
 """
