@@ -77,6 +77,13 @@ def ids_text(ids, limit: int = 10) -> str:
     return text + (f", ... ({len(ids)} in all)" if len(ids) > limit else "")
 
 
+def on_cpu() -> bool:
+    """Whether the initialised Taichi runtime runs on the CPU (x64 or arm64), not a GPU."""
+    import taichi as ti
+
+    return ti.lang.impl.current_cfg().arch in (ti.x64, ti.arm64)
+
+
 def is_f64() -> bool:
     """Whether the initialised Taichi runtime computes in double precision."""
     import taichi as ti

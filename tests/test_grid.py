@@ -281,7 +281,7 @@ def test_blocked_scan_gives_the_serial_sort(ti_cpu, monkeypatch):
     lo, hi, pos, active, mask = make_case(dim, n, n, seed=11)
     out = []
     for blocked in (False, True):
-        monkeypatch.setattr(scan, "_is_cpu", lambda b=blocked: not b)
+        monkeypatch.setattr(scan, "on_cpu", lambda b=blocked: not b)
         x, act, _, _ = make_fields(dim, n, pos, active, mask)
         grid = NeighbourGrid(n, dim, lo, hi, CELL, max_neighbours=400)
         assert grid._scan.blocked == blocked

@@ -28,7 +28,7 @@ import numpy as np
 import taichi as ti
 
 from .. import guard
-from ..backend import is_f64
+from ..backend import is_f64, on_cpu
 from ..errors import InputError, InstabilityError
 from ..linalg.ell_pcg import EllOverflowError, EllPCG
 from ..linalg.mg_pcg import MGPCG
@@ -253,7 +253,7 @@ class ISPHSolver(SolverCommon):
             self.b = self.ppe.b
             self.psol = self.ppe.x
         else:
-            check_sparse_cg_backend(cfg.isph.ppe, ti.lang.impl.current_cfg().arch in (ti.x64, ti.arm64))
+            check_sparse_cg_backend(cfg.isph.ppe, on_cpu())
             self.ppe = SparseCGSolver(max(self.n_water, 1), max(self.n_water, 1) * (self.max_nb + 1), fp,
                                       cfg.isph.ppe.tolerance, cfg.isph.ppe.max_iterations)
         self.dirichlet_scale = self._lattice_laplacian_sum()

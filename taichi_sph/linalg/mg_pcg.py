@@ -63,6 +63,7 @@ import time
 import numpy as np
 import taichi as ti
 
+from ..backend import on_cpu
 from ..sph.scan import PrefixSum
 from .ell_pcg import EllPCG
 
@@ -76,10 +77,6 @@ MAX_COARSEST = 8
 MAX_LEVELS = 16
 #: cell levels with fewer cells run in one serial kernel
 SERIAL_BELOW = 2048
-
-
-def _is_cpu_arch(arch) -> bool:
-    return arch in (ti.x64, ti.arm64)
 
 
 @ti.data_oriented
@@ -145,7 +142,7 @@ class MGPCG(EllPCG):
         self.agg.fill(-1)
         # cell levels 0 .. n_par - 1 run as parallel kernels, the rest (always the coarsest) in one serial one;
         # on a GPU, where a launch costs microseconds and one thread is slow, only the coarsest is serial
-        cpu = _is_cpu_arch(ti.lang.impl.current_cfg().arch)
+        cpu = on_cpu()
         n_par = 0
         while n_par < self.m - 1 and (self.ncells[n_par] >= SERIAL_BELOW or not cpu):
             n_par += 1

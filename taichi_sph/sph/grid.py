@@ -32,6 +32,7 @@ import math
 import numpy as np
 import taichi as ti
 
+from ..backend import on_cpu
 from .operators import rel, wrap
 from .scan import PrefixSum
 
@@ -51,10 +52,6 @@ class NeighbourOverflowError(RuntimeError):
             f"{who} has {self.count} neighbours but the neighbour list holds {self.capacity}{others}; "
             f"raise the config key `neighbours.max` to at least {self.count}"
         )
-
-
-def _is_cpu_arch(arch) -> bool:
-    return arch in (ti.x64, ti.arm64)
 
 
 @ti.data_oriented
@@ -101,7 +98,7 @@ class NeighbourGrid:
         # python floats/ints for ti.static use inside kernels
         self._lo = [float(v) for v in lo]
         self._hi = [float(v) for v in hi]
-        self._serial = _is_cpu_arch(ti.lang.impl.current_cfg().arch)
+        self._serial = on_cpu()
 
         self.perm = ti.field(ti.i32, self.capacity)
         self.cell_start = ti.field(ti.i32, self.num_cells + 1)

@@ -21,9 +21,7 @@ import math
 
 import taichi as ti
 
-
-def _is_cpu() -> bool:
-    return ti.lang.impl.current_cfg().arch in (ti.x64, ti.arm64)
+from ..backend import on_cpu
 
 
 @ti.data_oriented
@@ -33,7 +31,7 @@ class PrefixSum:
 
     def __init__(self, capacity: int, blocked: bool | None = None):
         self.capacity = max(int(capacity), 1)
-        self.blocked = (not _is_cpu()) if blocked is None else bool(blocked)
+        self.blocked = (not on_cpu()) if blocked is None else bool(blocked)
         # about sqrt(capacity) per block: the serial scan of the block totals and each block's own pass
         # are then about equally long
         self.block = max(64, 1 << math.ceil(math.log2(math.sqrt(self.capacity))))

@@ -42,11 +42,11 @@ import numpy as np
 import taichi as ti
 
 from .. import guard
-from ..backend import is_f64
+from ..backend import is_f64, on_cpu
 from ..contract import DT_CFL, DT_FORCE, DT_VISCOUS
 from ..scene import AIR, SOIL, WALL, WATER
 from ..sph import kernels, operators, walls
-from ..sph.grid import NeighbourGrid, NeighbourOverflowError, _is_cpu_arch
+from ..sph.grid import NeighbourGrid, NeighbourOverflowError
 from ..sph.scan import PrefixSum
 from ..sph.solver_common import SolverCommon
 from ..sph.wall_motion import WallMotion
@@ -180,7 +180,7 @@ class WCSPHSolver(SolverCommon):
         self.nq = 3 if self.variable_h else 2
         # small scenes run their loops serially on the CPU: a parallel loop costs ~50 us of thread dispatch
         # there (never on a GPU, where a serial loop runs on one slow thread)
-        self.serial = _is_cpu_arch(ti.lang.impl.current_cfg().arch) and (
+        self.serial = on_cpu() and (
             self.n_fluid + self.n_soil < (SERIAL_BELOW_SOIL if self.n_soil else SERIAL_BELOW))
 
         vec = ti.Vector.field
@@ -929,7 +929,7 @@ def deal_threads(has_soil: bool, serial: bool) -> int:
     """How many threads the moving list is dealt to (`_k_moving_list`): the CPU's threads in a parallel
     scene with soil, else 1 (the list stays in cell order)."""
     cfg = ti.lang.impl.current_cfg()
-    if has_soil and not serial and _is_cpu_arch(cfg.arch):
+    if has_soil and not serial and on_cpu():
         return max(1, int(cfg.cpu_max_num_threads))
     return 1
 
