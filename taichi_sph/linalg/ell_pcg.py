@@ -332,30 +332,54 @@ class EllPCG:
             self.p[i] = self.z[i] + beta * self.p[i]
         self.pap[None] = zero
         for i in range(n):
-            api = self.row_times(i, self.p)
-            self.ap[i] = api
-            self.pap[None] += self.p[i] * api
-        self.breakdown[None] = 0
-        self.alpha[None] = zero
-        if self.pap[None] > 0:
-            self.alpha[None] = self.rz[None] / self.pap[None]
-        else:
-            self.breakdown[None] = 1
-        alpha = self.alpha[None]
+            self.pap[None] += self._ap_row(i)
+        alpha = self._step_length()
         self.rr[None] = zero
         if ti.static(jacobi):
             self.rz_new[None] = zero
         for i in range(n):
-            self.x[i] += alpha * self.p[i]
-            ri = self.r[i] - alpha * self.ap[i]
-            self.r[i] = ri
-            self.rr[None] += ri * ri
+            sums = self._update_row(i, alpha, jacobi)
+            self.rr[None] += sums[0]
             if ti.static(jacobi):
-                zi = self.inv_diag[i] * ri
-                self.z[i] = zi
-                self.rz_new[None] += ri * zi
+                self.rz_new[None] += sums[1]
+        return self._finish(jacobi)
+
+    @ti.func
+    def _ap_row(self, i):
+        """(A p)_i into ap; returns p_i (A p)_i, row i's share of p.Ap."""
+        api = self.row_times(i, self.p)
+        self.ap[i] = api
+        return self.p[i] * api
+
+    @ti.func
+    def _step_length(self):
+        """alpha = r.z / p.Ap from the fields (0, with breakdown set, where p.Ap <= 0); returns alpha."""
+        self.breakdown[None] = 0
+        self.alpha[None] = ti.cast(0, self.dtype)
+        if self.pap[None] > 0:
+            self.alpha[None] = self.rz[None] / self.pap[None]
+        else:
+            self.breakdown[None] = 1
+        return self.alpha[None]
+
+    @ti.func
+    def _update_row(self, i, alpha, jacobi: ti.template()):
+        """x_i += alpha p_i, r_i -= alpha (A p)_i, and with `jacobi` z_i = r_i / d_i; returns (r_i^2, r_i z_i)."""
+        self.x[i] += alpha * self.p[i]
+        ri = self.r[i] - alpha * self.ap[i]
+        self.r[i] = ri
+        rz = ti.cast(0, self.dtype)
         if ti.static(jacobi):
-            self.beta[None] = zero
+            zi = self.inv_diag[i] * ri
+            self.z[i] = zi
+            rz = ri * zi
+        return ti.Vector([ri * ri, rz])
+
+    @ti.func
+    def _finish(self, jacobi: ti.template()):
+        """With `jacobi` the next beta = r.z(new) / r.z; returns the recurrence |r|^2, or -1 on breakdown."""
+        if ti.static(jacobi):
+            self.beta[None] = ti.cast(0, self.dtype)
             if self.rz[None] > 0:
                 self.beta[None] = self.rz_new[None] / self.rz[None]
             self.rz[None] = self.rz_new[None]
@@ -394,46 +418,25 @@ class EllPCG:
             s = zero
             i = t
             while i < n:
-                api = self.row_times(i, self.p)
-                self.ap[i] = api
-                s += self.p[i] * api
+                s += self._ap_row(i)
                 i += STAGE_THREADS
             self.stage[t] = ti.Vector([s, zero, zero])
-        pap = self._folded()[0]
-        self.pap[None] = pap
-        self.breakdown[None] = 0
-        self.alpha[None] = zero
-        if pap > 0:
-            self.alpha[None] = self.rz[None] / pap
-        else:
-            self.breakdown[None] = 1
-        alpha = self.alpha[None]
+        self.pap[None] = self._folded()[0]
+        alpha = self._step_length()
         for t in range(STAGE_THREADS):
             s = ti.Vector([zero, zero, zero])
             i = t
             while i < n:
-                self.x[i] += alpha * self.p[i]
-                ri = self.r[i] - alpha * self.ap[i]
-                self.r[i] = ri
-                s[0] += ri * ri
-                if ti.static(jacobi):
-                    zi = self.inv_diag[i] * ri
-                    self.z[i] = zi
-                    s[1] += ri * zi
+                sums = self._update_row(i, alpha, jacobi)
+                s[0] += sums[0]
+                s[1] += sums[1]
                 i += STAGE_THREADS
             self.stage[t] = s
         sums = self._folded()
         self.rr[None] = sums[0]
         if ti.static(jacobi):
             self.rz_new[None] = sums[1]
-            self.beta[None] = zero
-            if self.rz[None] > 0:
-                self.beta[None] = sums[1] / self.rz[None]
-            self.rz[None] = sums[1]
-        out = ti.cast(sums[0], ti.f64)
-        if self.breakdown[None] == 1:
-            out = -1.0
-        return out
+        return self._finish(jacobi)
 
     @ti.kernel
     def _k_remove_mean(self, v: ti.template()):
