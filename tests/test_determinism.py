@@ -62,14 +62,18 @@ print("deterministic")
 """
 
 
-def test_one_thread_runs_are_bitwise_equal(tmp_path):
-    script = tmp_path / "determinism.py"
-    script.write_text(SCRIPT)
+def _run_script(path, text: str) -> str:
+    """Run `text` as a Python script at `path` in its own process (its own Taichi runtime); its stdout."""
+    path.write_text(text)
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    r = subprocess.run([sys.executable, str(script)], cwd=ROOT, env=env, capture_output=True, text=True,
+    r = subprocess.run([sys.executable, str(path)], cwd=ROOT, env=env, capture_output=True, text=True,
                        timeout=600, check=False)
     assert r.returncode == 0, r.stderr[-3000:]
-    assert "deterministic" in r.stdout
+    return r.stdout
+
+
+def test_one_thread_runs_are_bitwise_equal(tmp_path):
+    assert "deterministic" in _run_script(tmp_path / "determinism.py", SCRIPT)
 
 
 SCAN_SCRIPT = r"""
@@ -92,7 +96,7 @@ cases["isph mg"] = dict(cases["isph ell"], isph={"ppe": {"type": "mg_pcg"}})
 for name, data in cases.items():
     states = []
     for blocked in (False, True):
-        scan._is_cpu = (lambda b=blocked: not b)
+        scan.on_cpu = (lambda b=blocked: not b)
         cfg = load_config(data=data)
         s = make_solver(cfg, build_scene(cfg))
         scans = [s.grid._scan, getattr(s, "_row_scan", None) or s._moving_scan]
@@ -116,10 +120,4 @@ def test_blocked_prefix_sums_leave_the_steps_as_they_were(tmp_path):
     """The blocked prefix sums that GPUs take (the grid's cells, the PPE's row numbers, the multigrid's
     cells, the moving list; sph/scan.py), forced here on the CPU, give every particle's position, velocity
     and pressure of the serial ones bit for bit, after 10 steps of a collapsing column in both modes."""
-    script = tmp_path / "scan.py"
-    script.write_text(SCAN_SCRIPT)
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    r = subprocess.run([sys.executable, str(script)], cwd=ROOT, env=env, capture_output=True, text=True,
-                       timeout=600, check=False)
-    assert r.returncode == 0, r.stderr[-3000:]
-    assert "same" in r.stdout
+    assert "same" in _run_script(tmp_path / "scan.py", SCAN_SCRIPT)
