@@ -34,7 +34,8 @@ def _markers_and_eps(ti_cpu, data, points):
     mask.fill(1)
     eps = ti.field(float, n)
     d50 = ti.field(float, n)
-    ms.porosity(x, mask, n, eps, d50)
+    reach = ti.field(ti.i32, n)
+    ms.porosity(x, mask, n, eps, d50, reach)
     return eps.to_numpy(), d50.to_numpy()
 
 

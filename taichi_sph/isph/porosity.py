@@ -142,11 +142,14 @@ class MarkerSet:
 
     @ti.kernel
     def porosity(self, x: ti.template(), mask: ti.template(), n: ti.i32, eps: ti.template(),
-                 d50: ti.template()):
-        """eps_i (eq 32) and the local D50 for the first n particles with mask 1; eps = 1 elsewhere."""
+                 d50: ti.template(), reach: ti.template()):
+        """eps_i (eq 32) and the local D50 for the first n particles with mask 1; eps = 1 elsewhere.
+        reach_i is 1 where a marker of porosity below 1 lies within the support (the outer half of a face's
+        ramp, where eq 32 still gives eps 1, included), else 0."""
         for i in range(n):
             e = 1.0
             dloc = 1.0
+            near = 0
             if mask[i] == 1:
                 xi = x[i]
                 cc = ti.Vector.zero(ti.i32, ti.static(self.dim))
@@ -179,5 +182,8 @@ class MarkerSet:
                 if s > 0.0:
                     e = ti.max(ti.min(1.0, 2.0 - 2.0 * s), se / s)
                     dloc = sd / s
+                    if se < s:  # ground of porosity below 1 (eps0 = 1 markers are free water)
+                        near = 1
             eps[i] = e
             d50[i] = dloc
+            reach[i] = near

@@ -132,6 +132,8 @@ class ISPHSolver(SolverCommon):
         #: candidate of the cone test (in or next to the ground): eq 34's count or the plain count marks it,
         #: whatever its cone said (_k_tension reads it)
         self.candidate = ti.field(ti.i32, scene.n)
+        #: water that _k_tension frees in this pass (held in tension, with air within its support)
+        self.air_entry_now = ti.field(ti.i32, scene.n)
         self.shifting = sw.shifting
         self.shift_a = cfg.isph.shifting
         self.shift_max = cfg.isph.shifting_max * dx
@@ -158,10 +160,14 @@ class ISPHSolver(SolverCommon):
         self.eps = ti.field(float, n)
         self.kcoef = ti.field(float, n)
         self.d50 = ti.field(float, n)
+        #: 1 where a soil marker lies within the support (eq 32's reach), else 0
+        self.ground_reach = ti.field(ti.i32, n)
         self.drag = ti.field(float, n)
         #: rest fill of water that starts in or next to ground: its <rho> / rho_bar at t = 0
         self.rest_fill = ti.field(float, n)
         self.rest_fill.fill(1.0)
+        #: the free-surface flag at the end of the last step (_k_surface_cone reads it: air's path)
+        self.air_last = ti.field(ti.i32, n)
         self.nu_t = ti.field(float, n)
         self.L = ti.Matrix.field(dim, dim, float, n)
         self.kind = ti.field(ti.i32, n)
@@ -204,7 +210,7 @@ class ISPHSolver(SolverCommon):
         self.g = vec(self.g_np.tolist())
         self.particle_fields = [self.x, self.v, self.normal, self.p, self.eps, self.kind, self.ids, self.active]
         if self.porous:
-            self.particle_fields.append(self.rest_fill)
+            self.particle_fields += [self.rest_fill, self.air_last]
 
         self.np_fp = np.float64 if is_f64() else np.float32
         self.x.from_numpy(scene.position.astype(self.np_fp))
@@ -554,23 +560,29 @@ class ISPHSolver(SolverCommon):
     def _k_surface_cone(self):
         """Free surface in and next to porous ground: eq 34's candidates confirmed by an empty cone.
 
-        A water particle in the ground (eps_i < 1) or with a neighbour there is a candidate when eq 34's
-        count marked it free, or (in free water) when the plain count of its neighbours is below N_surf:
-        below a plug's exit face the filled-volume count reads the pore water as full, so water hanging
+        A water particle in the ground (eps_i < 1), with a neighbour there, or within the markers' reach
+        (the outer half of a face's ramp, where eq 32 still gives eps 1 but the pore water below is
+        sparse) is a candidate when eq 34's count marked it free, or (in free water) when the plain count
+        of its neighbours is below N_surf: below a plug's exit face the filled-volume count reads the pore water as full, so water hanging
         there was never free and sucked on the plug. A candidate is free surface only if no neighbour
         (water, or a wet wall) lies within the cone of half-angle `isph.ground_surface_cone` about its
         outward normal n_i = -sum_j V_j grad W_ij (V_j the bulk volume m / (eps_j rho_w), dx^d for a wall):
         the scan-region test of Marrone et al. (2010, J. Comput. Phys. 229), with the support as its reach.
         On a surface the half-space beyond it is empty whatever the arrangement; inside the ground a
         disordered pore lattice lowers the count (6-8 neighbours within r_e in 2D at eps 0.4) but leaves
-        no empty cone, so it is not flagged (docs/isph.md, "Surface test in the ground"). A candidate with
-        at most dim water neighbours is free whatever its cone: a drop of a few particles hanging in a
-        corner of walls, which block its cone, would otherwise have no Dirichlet row (a singular block of
-        the PPE, on which CG diverged)."""
+        no empty cone, so it is not flagged (docs/isph.md, "Surface test in the ground"). An empty cone
+        counts only where air can reach it: the particle or a water neighbour was free surface at the end
+        of the last step, or the cone is empty out to 2 r_e (_cone_empty_beyond). A gap of a pore spacing
+        inside saturated ground, which the flow opens and closes from step to step, holds no air and is
+        not a surface: flagged, each such row was a sink for a step, and the flow into it was projected
+        out in one step when it closed (pressure spikes of 10-20 kPa in the permeameter's plug at dt
+        0.25 ms). A candidate with at most dim water neighbours is free whatever its cone: a drop of a few
+        particles hanging in a corner of walls, which block its cone, would otherwise have no Dirichlet row
+        (a singular block of the PPE, on which CG diverged)."""
         for i in range(self.n):
             if self.solve_mask[i] == 1 and self.isolated[i] == 0:
                 xi = self.x[i]
-                near = self.eps[i] < 1.0
+                near = self.eps[i] < 1.0 or self.ground_reach[i] == 1
                 plain = 0.0
                 n_water = 0
                 gsum = ti.Vector.zero(float, self.dim)
@@ -610,12 +622,47 @@ class ISPHSolver(SolverCommon):
                                 if self._present(j):
                                     if -rij.dot(n_out) >= self.cone_cos * r:
                                         is_free = 0
+                            # air reaches an empty cone only from the air: from a surface there in the
+                            # last step (its own or a water neighbour's), or through a cone empty to 2 r_e
+                            if is_free == 1 and self.air_last[i] == 0:
+                                path = 0
+                                for k in range(self.grid.nbr_count[i]):
+                                    j = self.grid.nbr[i, k]
+                                    if self.kind[j] == WATER and self.air_last[j] == 1:
+                                        path = 1
+                                if path == 0:
+                                    path = self._cone_empty_beyond(i, xi, n_out)
+                                is_free = path
                     # draining ground: scattered pore water with air between, a deficit of number
                     # density with no empty cone (isph.ground_surface_density)
                     if ti.static(self.ground_beta > 0.0):
                         if self.rho_n[i] < self.ground_beta * self.eps[i] * self.rho_w * self.rest_fill[i]:
                             is_free = 1
                     self.free[i] = is_free
+
+    @ti.func
+    def _cone_empty_beyond(self, i, xi, n_out) -> ti.i32:
+        """1 if no water particle (or wet wall) lies in particle i's cone about n_out out to twice the
+        support, where a surface (dry ground ahead of a front, the open space below a plug) has air and a
+        gap between pore particles has water beyond it: the grid's cells around x_i + 1.5 r_e n_out are
+        searched (the cone's part beyond that block, wide of its axis, is not)."""
+        q = xi + 1.5 * self.re * n_out
+        empty = 1
+        for off in ti.static(ti.grouped(ti.ndrange(*([(-1, 2)] * self.dim)))):
+            a, b = self.grid.cell_range(q, off)
+            for k in range(a, b):
+                if k != i and self.active[k] != 0 and self._present(k):
+                    rik = operators.rel(xi, self.x[k], self.period)
+                    r = rik.norm()
+                    if r < 2.0 * self.re and -rik.dot(n_out) >= self.cone_cos * r:
+                        empty = 0
+        return empty
+
+    @ti.kernel
+    def _k_remember_air(self):
+        """The step's free-surface flags, where the next step's cone test looks for air (air_last)."""
+        for i in range(self.n):
+            self.air_last[i] = self.free[i]
 
     @ti.kernel
     def _k_rest_fill(self):
@@ -826,16 +873,28 @@ class ISPHSolver(SolverCommon):
     def _k_tension(self, psol: ti.template()) -> ti.i32:
         """Free water next to the ground that the PPE holds in tension becomes free surface: a candidate of
         the cone test (short of neighbours, but a neighbour in its cone) in free water (eps_i = 1) whose
-        solved pressure is below the atmosphere's (P < 0). Without capillarity water cannot be pulled: air
-        enters where the projection would hold a thinning sheet together. Returns how many were freed
-        (the PPE is then solved again). Not applied inside the ground (eps_i < 1): near a plug's exit
-        face the pore pressure is near zero, and freeing its noise put Dirichlet rows into the plug."""
-        n_new = 0
+        solved pressure is below the atmosphere's (P < 0) and which has a free-surface water particle
+        within its support. Without capillarity water cannot be pulled: air enters where the projection
+        would hold a thinning sheet together, but only from the air, through the surface: water with no
+        surface in its support (the bottom of a column standing on a saturated plug, short of neighbours
+        only because the pore water below it is sparse) is closed to the air and keeps its tension, which
+        there is the transient of discrete particles entering the pores (docs/isph.md, "Surface test in the
+        ground"). Air advances one support per pass. Returns how many were freed (the PPE is then solved
+        again). Not applied inside the ground (eps_i < 1): near a plug's exit face the pore pressure is
+        near zero, and freeing its noise put Dirichlet rows into the plug."""
         for i in range(self.n):
+            self.air_entry_now[i] = 0
             if self.solve_mask[i] == 1 and self.free[i] == 0 and self.candidate[i] == 1 and self.eps[i] >= 1.0:
                 if psol[self.row[i]] < 0.0:
-                    self.free[i] = 1
-                    n_new += 1
+                    for k in range(self.grid.nbr_count[i]):
+                        j = self.grid.nbr[i, k]
+                        if self.kind[j] == WATER and self.free[j] == 1:
+                            self.air_entry_now[i] = 1
+        n_new = 0
+        for i in range(self.n):
+            if self.air_entry_now[i] == 1:
+                self.free[i] = 1
+                n_new += 1
         return n_new
 
     def _solve_tension(self, iters, res, ok, sol):
@@ -1134,7 +1193,7 @@ class ISPHSolver(SolverCommon):
     def update_porosity(self):
         """eps and D50 of every water particle from the soil markers (eq 32); nothing without soil."""
         if self.porous:
-            self.markers.porosity(self.x, self.solve_mask, self.n, self.eps, self.d50)
+            self.markers.porosity(self.x, self.solve_mask, self.n, self.eps, self.d50, self.ground_reach)
 
     def step(self, dt: float) -> dict:
         t0 = _time.perf_counter()
@@ -1180,6 +1239,8 @@ class ISPHSolver(SolverCommon):
             guard.solver_failure(self.step_count + 1, self.time + dt, iters, res, self.ppe.tolerance,
                                  self.cfg.isph.ppe.on_failure)
         self._k_scatter_pressure(self.psol)
+        if self.ground_cone:
+            self._k_remember_air()
         self._k_water_gradient()
         self.wall_pressure.update()
         self._k_corrector()
@@ -1211,7 +1272,9 @@ class ISPHSolver(SolverCommon):
         self._k_wet()
         self._k_density()
         if self.ground_cone:
+            self.air_last.fill(1)
             self._k_surface_cone()
+            self._k_remember_air()
         if self.porous:
             self._k_rest_fill()
         d = self._k_diagnostics().to_numpy()
@@ -1248,7 +1311,7 @@ class ISPHSolver(SolverCommon):
     #: fields that carry over from one step to the next (all else is recomputed by each step); the
     #: pressure is the PPE's warm start. Per-particle state added later belongs in this tuple.
     state_fields = ("x", "v", "normal", "p", "eps", "kind", "ids", "active", "rho_n", "d50", "rest_fill",
-                    "wall_body", "wall_origin")
+                    "wall_body", "wall_origin", "air_last")
     state_scalars = ("step_count", "time", "removed_total")
 
     def state(self) -> dict:
@@ -1261,6 +1324,9 @@ class ISPHSolver(SolverCommon):
         """Continue from a `state()` of a solver built from the same config."""
         from ..sph.state import restore
 
+        if "air_last" not in state:
+            # saved before the cone test looked for air: every surface is open to it, as at t = 0
+            state = {**state, "air_last": np.ones(self.n, np.int32)}
         restore(self, state, self.state_fields, self.state_scalars)
 
 

@@ -356,6 +356,28 @@ class NeighbourGrid:
             pid = int(ids[index]) if ids is not None else None
             raise NeighbourOverflowError(index, pid, count, self.max_neighbours, rows)
 
+    @ti.func
+    def cell_range(self, point, off):
+        """Particle index range [a, b) of the cell `off` (integer offsets per axis) away from the cell that
+        holds `point`, in the sorted order of the last `sort()` with `reorder` applied; an empty range where
+        that cell lies outside the grid (periodic axes wrap)."""
+        lin = 0
+        ok = 1
+        for d in ti.static(range(self.dim)):
+            c = ti.cast(ti.floor((point[d] - ti.static(self._lo[d])) / ti.static(self._edge[d])), ti.i32)
+            c += off[d]
+            if ti.static(self.period[d] > 0.0):
+                c = (c % ti.static(self.ncell[d]) + ti.static(self.ncell[d])) % ti.static(self.ncell[d])
+            if c < 0 or c >= ti.static(self.ncell[d]):
+                ok = 0
+            lin = lin * ti.static(self.ncell[d]) + ti.min(ti.max(c, 0), ti.static(self.ncell[d] - 1))
+        a = 0
+        b = 0
+        if ok:
+            a = self.cell_start[lin]
+            b = self.cell_start[lin + 1]
+        return a, b
+
     @ti.kernel
     def _group_rows(self, group: ti.template(), n: ti.i32):
         for i in range(n):
