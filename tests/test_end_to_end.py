@@ -159,3 +159,28 @@ def test_unstable_run_stops_with_exit_3_and_keeps_frames(run_cli, tmp_path):
     # the XDMF sidecar is written whatever the end, naming every frame kept
     grids = ET.parse(out.with_suffix(".xdmf")).getroot().findall("Domain/Grid/Grid")
     assert len(grids) == n_frames
+
+
+def test_fixed_dt_above_the_cfl_bound_is_reported(run_cli, tmp_path):
+    """A fixed dt that lets the fastest particle cross more than `timestep.cfl` (0.2 in this config) of a
+    spacing per step is what the adaptive step would have refused; the run reports its Courant number max speed x dt / dx
+    (root attributes, and a warning naming the key where more than 1 % of the steps ran above it), so that
+    a result that depends on dt is not silent. The isph dam break (a = 0.1 m, dx 1 cm) surges at up to
+    ~2 sqrt(g a) ~ 2 m/s (Ritter's front speed): at dt 2 ms that is C ~ 0.4, at 0.25 ms C ~ 0.05."""
+    base = ["--config", "configs/dambreak.yaml", "--set", "dx=0.01", "--set", "output.every=0.05", "--no-progress"]
+    fast, slow = tmp_path / "fast.h5", tmp_path / "slow.h5"
+    r = run_cli(*base, "--set", "dt=0.002", "--set", "end_time=0.2", "--out", fast)
+    assert r.returncode == 0, r.stderr
+    assert "timestep.cfl" in r.stderr and "ran above" in r.stderr, r.stderr
+    r = run_cli(*base, "--set", "dt=0.00025", "--set", "end_time=0.1", "--out", slow)
+    assert r.returncode == 0, r.stderr
+    assert "ran above" not in r.stderr, r.stderr
+    for path, dt in ((fast, 0.002), (slow, 0.00025)):
+        with h5py.File(path, "r") as f:
+            speed = f["diagnostics/max_speed"][:]
+            c = float(f.attrs["courant_max"])
+            assert c == pytest.approx(speed.max() * dt / 0.01, rel=1e-12)
+            share = float(f.attrs["courant_above_cfl_share"])
+            assert share == pytest.approx(np.mean(speed * dt / 0.01 > 0.2), abs=1e-12)
+    with h5py.File(fast, "r") as f:
+        assert 0.2 < float(f.attrs["courant_max"]) < 1.0 and float(f.attrs["courant_above_cfl_share"]) > 0.01
