@@ -117,14 +117,20 @@ def analyse(path: str, times, measured, depth, column=2.0):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+")
-    ap.add_argument("--times", default="0.4,0.8,1.2,1.6,2.0", help="comma-separated times (s)")
+    ap.add_argument("--times", help="comma-separated times (s); default the measured profiles' times, or "
+                                    "0.4,0.8,1.2,1.6,2.0")
     ap.add_argument("--measured", help="CSV of measured profiles: t, x, eta (s, m, m)")
     ap.add_argument("--depth", type=float, help="initial depth H0 (m); default from the first frame")
     ap.add_argument("--column", type=float, default=2.0, help="column width in particle spacings (default 2)")
     ap.add_argument("--plot", help="PNG of the profiles (needs matplotlib)")
     args = ap.parse_args(argv)
-    times = [float(v) for v in args.times.split(",") if v.strip()]
     measured = read_measured(args.measured) if args.measured else None
+    if args.times:
+        times = [float(v) for v in args.times.split(",") if v.strip()]
+    elif measured is not None:
+        times = sorted(set(measured[:, 0].tolist()))
+    else:
+        times = [0.4, 0.8, 1.2, 1.6, 2.0]
     results = []
     for path in args.runs:
         h0, rows, score = analyse(path, times, measured, args.depth, args.column)
