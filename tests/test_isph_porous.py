@@ -252,6 +252,7 @@ def test_air_entry_suction_keeps_the_permeameter_on_the_ode(tmp_path):
     assert max(worst.values()) < 0.03 and spread < 0.03, (worst, spread)
 
 
+@pytest.mark.xdist_group("permeameter_runs")  # one worker computes the shared runs once
 def test_permeameter_follows_the_falling_head_ode_at_two_time_steps(permeameter_runs):
     """The water level above the plug follows the falling-head ODE over the first half of the drainage
     (h from 0.2 to 0.1 m) at dt 1 and 0.5 ms. The reference keeps the inertia of the column and the plug,
@@ -303,6 +304,7 @@ def test_coarse_permeameter_level_does_not_depend_on_the_time_step(tmp_path):
     assert spread < 0.03, spread
 
 
+@pytest.mark.xdist_group("permeameter_runs")  # one worker computes the shared runs once
 def test_permeameter_core_is_not_free_surface(permeameter_runs):
     """The saturated plug's core (farther than r_e from its faces) holds no Dirichlet rows: the cone test
     in the ground flags none of it (time mean over frames) at dt 1 / 0.5 ms, against 26 % (dt 0.5 ms) with
@@ -313,6 +315,7 @@ def test_permeameter_core_is_not_free_surface(permeameter_runs):
         assert flagged < 0.005, (dt, flagged)
 
 
+@pytest.mark.xdist_group("permeameter_runs")  # one worker computes the shared runs once
 def test_permeameter_core_holds_its_pore_volume(permeameter_runs):
     """While the water seeps through, the plug's core holds its pore volume of water: counted without a
     kernel (each particle's bulk volume dx^2 / eps over the core's area), time mean over 0.1-0.44 s,
