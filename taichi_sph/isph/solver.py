@@ -621,7 +621,7 @@ class ISPHSolver(SolverCommon):
                             for k in range(self.grid.nbr_count[i]):
                                 j, rij, r = self._pair(i, k, xi)
                                 if self._present(j):
-                                    if -rij.dot(n_out) >= self.cone_cos * r:
+                                    if self._in_cone(rij, r, n_out):
                                         is_free = 0
                             # air reaches an empty cone only from the air: from a surface there in the
                             # last step (its own or a water neighbour's), or through a cone empty to 2 r_e
@@ -642,6 +642,12 @@ class ISPHSolver(SolverCommon):
                     self.free[i] = is_free
 
     @ti.func
+    def _in_cone(self, rij, r, n_out) -> ti.i32:
+        """Whether the neighbour at x_i - rij (distance r) lies in particle i's cone of half-angle
+        `isph.ground_surface_cone` about its outward normal n_out."""
+        return -rij.dot(n_out) >= self.cone_cos * r
+
+    @ti.func
     def _cone_empty_beyond(self, i, xi, n_out) -> ti.i32:
         """1 if no water particle (or wet wall) lies in particle i's cone about n_out out to twice the
         support, where a surface (dry ground ahead of a front, the open space below a plug) has air and a
@@ -657,7 +663,7 @@ class ISPHSolver(SolverCommon):
                 if k != i and self.active[k] != 0 and self._present(k):
                     rik = operators.rel(xi, self.x[k], self.period)
                     r = rik.norm()
-                    if r < 2.0 * self.re and -rik.dot(n_out) >= self.cone_cos * r:
+                    if r < 2.0 * self.re and self._in_cone(rik, r, n_out):
                         empty = 0
         return empty
 
