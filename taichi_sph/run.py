@@ -87,8 +87,8 @@ class CourantRecord:
     velocity in mode isph) against `timestep.cfl`, the bound the adaptive step would hold. Recorded in the
     run file (root attributes `courant_max`, `courant_max_time`, `courant_above_cfl_share`) and, where
     more than 1 % of the steps ran above it, a warning: such a run's results can depend on dt (the
-    permeameter at dx 2.5 mm and dt 1 ms drains 3-4 % slower than at 0.5 or 0.25 ms while the water below
-    its plug runs at C ~ 0.85; docs/isph.md)."""
+    permeameter at dx 2.5 mm and dt 1 ms, C up to 1.33, drains 3-4 % slower than at 0.5 or 0.25 ms;
+    docs/isph.md). The counts go into every checkpoint, so a resumed run reports the whole run."""
 
     WARN_SHARE = 0.01
 
@@ -106,6 +106,15 @@ class CourantRecord:
             self.above += 1
         if c > self.max:
             self.max, self.max_time = c, t
+
+    def state(self) -> list:
+        """The counts so far, for a checkpoint."""
+        return [self.steps, self.above, self.max, self.max_time]
+
+    def restore(self, state) -> None:
+        """Go on from a checkpoint's counts (`state()`)."""
+        steps, above, cmax, cmax_time = state
+        self.steps, self.above, self.max, self.max_time = int(steps), int(above), float(cmax), float(cmax_time)
 
     def report(self, writer, summary: dict) -> None:
         share = self.above / self.steps
@@ -189,7 +198,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     wall0 = _time.perf_counter()
     step_wall = 0.0
     volume0 = 0.0
-    limit_counts: dict[int, int] = {}  # steps bound by each dt limit (this process)
+    limit_counts: dict[int, int] = {}  # steps bound by each dt limit (a resumed run: from its start)
     guard = None
     try:
         guard = StabilityGuard(cfg, scene.kind, _reference_density(solver, scene.kind), solver.max_speed_bound(),
@@ -219,6 +228,17 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
         gc.freeze()
         n_fixed = None if stepper.fixed is None or propose is not None else int(round(cfg.end_time / stepper.fixed))
         courant = CourantRecord(cfg) if n_fixed is not None else None
+        if saved is not None:  # the counts go on from the checkpoint (one written before they were kept: from here)
+            limit_counts.update({int(k): v for k, v in saved.get("limit_counts", {}).items()})
+            if courant is not None and saved.get("courant"):
+                courant.restore(saved["courant"])
+
+        def driver_state() -> dict:
+            """What the step loop needs to go on from a checkpoint."""
+            return {"t": t, "next_out": next_out, "last": last, "volume0": volume0,
+                    "limit_counts": {str(k): v for k, v in limit_counts.items()},
+                    "courant": courant.state() if courant is not None else None}
+
         checkpoints.catch_sigint()
         while True:
             if n_fixed is not None:
@@ -256,14 +276,14 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                     next_out += every
             if checkpoints.due(t):
                 _flush_diag(writer, diag)
-                checkpoints.write(t, {"t": t, "next_out": next_out, "last": last, "volume0": volume0})
+                checkpoints.write(t, driver_state())
                 if checkpoints.interrupted:
                     raise KeyboardInterrupt
             progress_bar.update(t, solver.step_count / max(step_wall, 1e-9),
                                 f", CG {last['cg_iterations']}" if "cg_iterations" in last else f", dt {dt:.3g} s")
         if checkpoints.last_step != solver.step_count:  # every finished run can go on (`taichi-sph resume`)
             _flush_diag(writer, diag)
-            checkpoints.write(t, {"t": t, "next_out": next_out, "last": last, "volume0": volume0})
+            checkpoints.write(t, driver_state())
         summary["status"] = "completed"
     except InstabilityError as exc:
         summary["status"] = "unstable"

@@ -45,6 +45,13 @@ def _same_runs(a_path, b_path):
             np.testing.assert_array_equal(pb[k][0], pa[k][0])
             np.testing.assert_array_equal(pb[k][1], pa[k][1])
         assert b.attrs["status"] == "completed"
+        # the run's own summaries cover the whole run, not only the part after the checkpoint: the
+        # Courant number of a fixed dt and the share of steps each dt limit bound (their counts go into
+        # every checkpoint)
+        for key in ("courant_max", "courant_max_time", "courant_above_cfl_share", "dt_limit_share"):
+            assert (key in b.attrs) == (key in a.attrs), key
+            if key in a.attrs:
+                assert b.attrs[key] == a.attrs[key], key
 
 
 @pytest.mark.parametrize("mode", ["isph", "wcsph_biot"])
