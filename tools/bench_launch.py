@@ -39,8 +39,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
-from bench import machine  # noqa: E402
-from bench_wcsph import _shown, load_average, replace_section  # noqa: E402
+from bench import machine
+from bench_wcsph import _shown, load_average, replace_section
 
 
 def timed(fn, steps: int, chunk: int, reset) -> dict:
@@ -143,12 +143,12 @@ def main() -> int:
         return f"{format(statistics.median(vals), fmt)} ({format(min(vals), fmt)}-{format(max(vals), fmt)})"
 
     lines = [
-        f"Machine: {machine()}; Taichi {'.'.join(map(str, ti.__version__))}, {args.threads} threads, "
-        f"{be['precision']}. Produced by `python tools/bench_launch.py` on {time.strftime('%Y-%m-%d')}: "
-        f"{_shown(args.config)} ({' '.join(overrides)}), {solver.n_fluid} moving particles, {args.rounds} "
-        f"rounds of {args.steps} calls each (chunks of {args.chunk} from one saved state) after {args.warmup} "
-        f"full steps; load {load0:.1f} / {load1:.1f} "
-        "(1-minute load average at the start / end). Median (range over the rounds).",
+        (f"Machine: {machine()}; Taichi {'.'.join(map(str, ti.__version__))}, {args.threads} threads, "
+         f"{be['precision']}. Produced by `python tools/bench_launch.py` on {time.strftime('%Y-%m-%d')}: "
+         f"{_shown(args.config)} ({' '.join(overrides)}), {solver.n_fluid} moving particles, {args.rounds} "
+         f"rounds of {args.steps} calls each (chunks of {args.chunk} from one saved state) after {args.warmup} "
+         f"full steps; load {load0:.1f} / {load1:.1f} "
+         "(1-minute load average at the start / end). Median (range over the rounds)."),
         "",
         "| what runs | wall ms per call | CPU s / wall s | calling thread's CPU ms per call |",
         "|---|---|---|---|",
