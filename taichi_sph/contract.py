@@ -74,8 +74,9 @@ class Solver(Protocol):
         """Frame fields (position, velocity, pressure, density, active, ...) in particle-id order."""
 
     def guard_fields(self) -> dict[str, np.ndarray]:
-        """The fields the guard's full check reads (position, velocity, pressure, density, active), in
-        particle-id order; cheaper than fields_by_id (SolverCommon gives it)."""
+        """The fields the guard's full check reads (position, density, active, and `finite`: position,
+        velocity, pressure and density all finite), in particle-id order; cheaper than fields_by_id
+        (SolverCommon gives it)."""
 
     def max_speed_bound(self) -> float:
         """The speed above which the guard stops the run (m/s)."""

@@ -107,12 +107,16 @@ class StabilityGuard:
 
     def check_fields(self, step: int, time: float, fields: dict) -> None:
         """Non-finite state, density ratio of fluid particles, walls at rest, fluid inside walls (fields in
-        id order)."""
+        id order: a frame's, or the solver's guard_fields, whose `finite` says per particle whether its
+        position, velocity, pressure and density are finite)."""
         active = np.asarray(fields["active"], dtype=bool)
-        bad = np.zeros(len(active), dtype=bool)
-        for name in ("position", "velocity", "pressure", "density"):
-            a = np.asarray(fields[name], dtype=float)
-            bad |= ~np.isfinite(a.reshape(len(a), -1)).all(axis=1)
+        if "finite" in fields:
+            bad = ~np.asarray(fields["finite"], dtype=bool)
+        else:
+            bad = np.zeros(len(active), dtype=bool)
+            for name in ("position", "velocity", "pressure", "density"):
+                a = np.asarray(fields[name], dtype=float)
+                bad |= ~np.isfinite(a.reshape(len(a), -1)).all(axis=1)
         bad &= active
         if bad.any():
             ids = np.flatnonzero(bad)

@@ -65,12 +65,22 @@ def test_built_solvers_satisfy_the_contract(ti_cpu, mode):
     # frames are in particle-id order: the walls have not moved from the scene's places
     wall = np.asarray(scene.kind) == 1
     assert np.array_equal(fields["position"][wall], np.asarray(scene.position)[wall])
-    # the guard's cheaper gather reads the same particles in the same order (velocity as stored)
+    # the guard's cheaper gather reads the same particles in the same order, and says which hold a
+    # non-finite position, velocity, pressure or density: here none; then one particle's velocity is made
+    # NaN and exactly its id is flagged
     checked = solver.guard_fields()
-    assert set(checked) == {"position", "velocity", "pressure", "density", "active"}
-    for key in ("position", "pressure", "density", "active"):
+    assert set(checked) == {"position", "density", "finite", "active"}
+    for key in ("position", "density", "active"):
         assert np.array_equal(checked[key], fields[key]), key
-    assert checked["velocity"].shape == fields["velocity"].shape
+    assert checked["finite"].all()
+    ids = solver.ids.to_numpy()
+    v = solver.v.to_numpy()
+    keep = v[3].copy()
+    v[3] = np.nan
+    solver.v.from_numpy(v)
+    assert np.flatnonzero(~solver.guard_fields()["finite"]).tolist() == [int(ids[3])]
+    v[3] = keep
+    solver.v.from_numpy(v)
     state = solver.state()
     solver.step(dt)
     solver.load_state(state)
