@@ -67,11 +67,11 @@ class SolverCommon:
                     ok = 0
                 if ti.math.isnan(self.v[i][d]) or ti.math.isinf(self.v[i][d]):
                     ok = 0
-            r = ti.cast(rho[i], ti.f64)
+            r = ti.cast(self.rho_w, ti.f64) if self.kind[i] == WALL else ti.cast(rho[i], ti.f64)
             p = ti.cast(self.p[i], ti.f64)
             if ti.math.isnan(r) or ti.math.isinf(r) or ti.math.isnan(p) or ti.math.isinf(p):
                 ok = 0
-            out[k, ti.static(self.dim)] = ti.cast(self.rho_w, ti.f64) if self.kind[i] == WALL else r
+            out[k, ti.static(self.dim)] = r
             out[k, ti.static(self.dim + 1)] = ti.cast(ok, ti.f64)
             out[k, ti.static(self.dim + 2)] = ti.cast(self.active[i] != 0, ti.f64)
 
