@@ -86,6 +86,7 @@ def _wcsph_features(cfg, sw: Switches) -> dict:
         "normalise_every": w.normalise_every,
         "water_sound_speed": cfg.sound_speed(),
         "artificial_viscosity": sw.artificial_viscosity,
+        "artificial_viscosity_speed": cfg.viscosity_speed(),
         "xsph": w.xsph,
         "variable_h": w.variable_h,
         "cohesion": {"water": w.water.cohesion, "air": w.air.cohesion},

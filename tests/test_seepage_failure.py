@@ -131,6 +131,20 @@ def test_levee_first_yield_at_the_landside_toe(run_cli, tmp_path):
     assert all(x > 1.885 for x, _ in first["x0"]), first  # all on the landside slope
 
 
+def _dry_front(path):
+    """The dry levee's wetting front (failure.wetting_front) and the Boussinesq front for a sand of the test's
+    permeability, 0.15 m/s, and S = n = 0.4, both per frame, from the river level the probe reads."""
+    from taichi_sph.wcsph.dupuit import boussinesq_front
+    from taichi_sph.wcsph.failure import wetting_front
+
+    wf = wetting_front(str(path), 0.02, 1.26)
+    t, front = np.asarray(wf["time"]), np.asarray(wf["front"])
+    with RunFile(path) as rf:
+        tr, hr = (np.asarray(v, float) for v in rf.probes()["river"])
+    integral = np.interp(t, tr, np.concatenate([[0.0], np.cumsum(0.5 * (hr[1:] + hr[:-1]) * np.diff(tr))]))
+    return t, front, boussinesq_front(0.15, 0.4, 1.0, integral)  # 1.62 sqrt(k integral(H dt) / S)
+
+
 def test_dry_levee_wetting_front_follows_boussinesq(run_cli, tmp_path):
     """configs/embankment.yaml `dry` at dx 0.02, shortened as the first-yield test (k five times the
     shipped, 0.15 m/s: the Boussinesq front's time scale is 1 / k), 4 s: the river (0.12 m, falling to
@@ -145,24 +159,22 @@ def test_dry_levee_wetting_front_follows_boussinesq(run_cli, tmp_path):
     -31 % at dx 0.01 at 30 s, docs/levee.md). The bound, 40 %, sits 3 points above the measured gap; the
     acceptance's 20 % needs the pore water's storage to carry n. Before ~2 s the wedge under the sloping
     face is still filling. The advance is slower than linear: x_f = a + b t^p gives p = 0.37 (0.34-0.35
-    in the full runs; Boussinesq 0.5); checked as a speed over 2.2-4 s below that over 0.4-2.2 s."""
-    s1, s2 = tmp_path / "d1.h5", tmp_path / "d2.h5"
+    in the full runs; Boussinesq 0.5); checked as a speed over 2.2-4 s below that over 0.4-2.2 s.
+    The sound speed is a knob the front must not follow: the same case to 2.2 s at the water's default
+    sound speed (351.5 m/s, K_f = 40 M: the physical c_v, 7.5x the steps) advances 0.181 m from 0.4 s
+    against 0.182 m at the pinned 17.2 m/s (-35 % against S = n). Bound: one particle spacing (the front is
+    one particle's position). Before the artificial viscosity took the flow's sound speed in place of the
+    raised c0 (docs/biot.md, "Artificial viscosity and the pore water's sound speed") it advanced 0.138 m."""
+    s1, s2, s3 = tmp_path / "d1.h5", tmp_path / "d2.h5", tmp_path / "d3.h5"
     r = run_cli("--config", "configs/embankment.yaml", "--variant", "dry_geostatic", "--set", "dx=0.02",
                 "--out", s1, "--no-progress")
     assert r.returncode == 0, r.stderr
-    r = run_cli("--config", "configs/embankment.yaml", "--variant", "dry", "--set", "dx=0.02",
-                "--set", "end_time=4.0", "--set", "output.every=0.1", "--set", "wcsph.soil.permeability=0.15",
-                "--set", f"wcsph.soil.start_from.run={s1}", "--out", s2, "--no-progress")
+    stage2 = ("--config", "configs/embankment.yaml", "--variant", "dry", "--set", "dx=0.02",
+              "--set", "output.every=0.1", "--set", "wcsph.soil.permeability=0.15",
+              "--set", f"wcsph.soil.start_from.run={s1}", "--no-progress")
+    r = run_cli(*stage2, "--set", "end_time=4.0", "--out", s2)
     assert r.returncode == 0, r.stderr
-    from taichi_sph.wcsph.dupuit import boussinesq_front
-    from taichi_sph.wcsph.failure import wetting_front
-
-    wf = wetting_front(str(s2), 0.02, 1.26)
-    t, front = np.asarray(wf["time"]), np.asarray(wf["front"])
-    with RunFile(s2) as rf:
-        tr, hr = (np.asarray(v, float) for v in rf.probes()["river"])
-    integral = np.interp(t, tr, np.concatenate([[0.0], np.cumsum(0.5 * (hr[1:] + hr[:-1]) * np.diff(tr))]))
-    ref = boussinesq_front(0.15, 0.4, 1.0, integral)  # 1.62 sqrt(k integral(H dt) / S), S = n = 0.4
+    t, front, ref = _dry_front(s2)
     k0 = int(np.argmin(np.abs(t - 0.4)))
     late = t >= 2.0 - 1e-9
     err = (front[late] - front[k0]) / (ref[late] - ref[k0]) - 1
@@ -170,3 +182,11 @@ def test_dry_levee_wetting_front_follows_boussinesq(run_cli, tmp_path):
     # slower than linear: the speed over the second half of the window is below that of the first half
     mid = int(np.argmin(np.abs(t - 2.2)))
     assert (front[-1] - front[mid]) / (t[-1] - t[mid]) < (front[mid] - front[k0]) / (t[mid] - t[k0])
+    # the physical c_v: the same advance to 2.2 s within one particle spacing, and the same bound
+    r = run_cli(*stage2, "--set", "end_time=2.2", "--set", "wcsph.water.sound_speed=null", "--out", s3)
+    assert r.returncode == 0, r.stderr
+    t3, front3, ref3 = _dry_front(s3)
+    k3, m3 = int(np.argmin(np.abs(t3 - 0.4))), int(np.argmin(np.abs(t3 - 2.2)))
+    adv, adv3 = front[mid] - front[k0], front3[m3] - front3[k3]
+    assert abs(adv3 - adv) < 0.02, (adv, adv3)
+    assert abs(adv3 / (ref3[m3] - ref3[k3]) - 1) < 0.4, adv3

@@ -66,6 +66,11 @@ class ArtificialViscosity(Strict):
     beta: NonNegFloat = 0.0
     #: eps_AF of eq 36 (seed: 0.1)
     eps: PosFloat = 0.1
+    #: the water's c_ij of eq 36 (m/s); default the flow's sound speed: wcsph.water.sound_speed if given,
+    #: else speed_factor x expected_speed, never the raise of c0 to the pore water's stiffness (with soil:
+    #: the viscosity alpha c h / 8 grows with c, and at c0 ~ 350 m/s it slowed the levee's seepage front to
+    #: 0.73x; docs/biot.md, "Artificial viscosity and the pore water's sound speed"). Air uses its own c.
+    speed: PosFloat | None = None
 
 
 class SoilBlock(Shape):

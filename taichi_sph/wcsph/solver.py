@@ -106,6 +106,7 @@ class WCSPHSolver(SolverCommon):
         self.p_amb = w.ambient_pressure
         self.rho_w = cfg.fluid.density
         self.c_w = cfg.sound_speed()
+        self.c_av_w = cfg.viscosity_speed()  # c of eq 36 for water: the flow's, not the pore water's raise
         self.gamma_w = _exponent(w.water.gamma)
         self.b_w = eos.tait_modulus(self.rho_w, self.c_w, self.gamma_w)
         self.nu_w = cfg.fluid.viscosity
@@ -332,8 +333,9 @@ class WCSPHSolver(SolverCommon):
         return nu
 
     @ti.func
-    def _c0(self, k):
-        c = self.c_w
+    def _c_av(self, k):
+        """c_ij of the artificial viscosity eq 36 for material k (schema.viscosity_speed for water)."""
+        c = self.c_av_w
         if self._is_air(k):
             c = self.c_a
         return c
@@ -648,7 +650,7 @@ class WCSPHSolver(SolverCommon):
                 if ti.static(self.variable_h):
                     hi = qi[self.Q_H]
                 nui = self._nu(ki)
-                c0i = self._c0(ki)
+                cavi = self._c_av(ki)
                 cohi = self._cohesion(ki)
                 acc = self.g
                 div = 0.0
@@ -699,7 +701,7 @@ class WCSPHSolver(SolverCommon):
                         hyd_t -= self.vol0 * self.g.dot(dxw - dxn) * gw
                         acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoi, nui, f_ij) * vij
                         if ti.static(self.av_on):
-                            pij = terms.artificial_viscosity(vij, rij, r2, hij, c0i, rhoi, self.av_alpha,
+                            pij = terms.artificial_viscosity(vij, rij, r2, hij, cavi, rhoi, self.av_alpha,
                                                              self.av_beta, self.av_eps)
                             acc -= mj * pij * gw
                     else:
@@ -717,7 +719,7 @@ class WCSPHSolver(SolverCommon):
                             accp += terms.pressure_same_material(mj, pri, prj, gw)
                             acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nui, f_ij) * vij
                             if ti.static(self.av_on):
-                                pij = terms.artificial_viscosity(vij, rij, r2, hij, c0i, 0.5 * (rhoi + rhoj),
+                                pij = terms.artificial_viscosity(vij, rij, r2, hij, cavi, 0.5 * (rhoi + rhoj),
                                                                  self.av_alpha, self.av_beta, self.av_eps)
                                 acc -= mj * pij * gw
                             if ti.static(self.cohesion_on):
