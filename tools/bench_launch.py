@@ -6,6 +6,9 @@ warm-up of full steps, each round times, one after the other:
 
 - `full step`: what tools/bench_wcsph.py times (eq 49's step chosen on the host, the kick-drift kernel,
   the list-rebuild test, the pair kernel, the reductions read back);
+- `full step and the guard`: the full step, and every `guard.every` steps the stability guard's field
+  check as a run makes it (taichi_sph/guard.py: the packed fields gathered by one kernel, then the
+  host's tests), its cost spread over the steps;
 - `two kernels, no host work`: the kick-drift and the pair kernel launched back to back with the last
   step's dt and weights, no rebuild test, no reads;
 - `pair kernel alone` and `kick-drift alone`;
@@ -80,21 +83,32 @@ def main() -> int:
 
     from taichi_sph import backend
     from taichi_sph.config import load_config
-    from taichi_sph.run import TimeStepper
+    from taichi_sph.guard import StabilityGuard
+    from taichi_sph.run import TimeStepper, _reference_density, _with_flag
     from taichi_sph.scene import build_scene
     from taichi_sph.solvers import make_solver
 
     be = backend.init("cpu", "auto", threads=args.threads, mode="wcsph_biot")
     cfg = load_config(args.config, overrides)
-    solver = make_solver(cfg, build_scene(cfg))
+    scene = build_scene(cfg)
+    solver = make_solver(cfg, scene)
     solver.initial_diagnostics()
     stepper = TimeStepper(cfg, solver.g_abs)
+    guard = StabilityGuard(cfg, scene.kind, _reference_density(solver, scene.kind), solver.max_speed_bound(),
+                           scene.body, scene.motions)
+    guard.start(_with_flag(solver.fields_by_id()))
 
     def full():
         solver.step(stepper.choose(0.0, solver.propose_dt())[0])
 
+    def full_and_guard():
+        full()
+        if guard.due(solver.step_count):
+            guard.check_fields(solver.step_count, solver.time, solver.guard_fields())
+
     for _ in range(args.warmup):
         full()
+    guard.check_fields(solver.step_count, solver.time, solver.guard_fields())  # compiles its gather kernel
     kick, pairs = solver._step_kernels
     n = solver.n
     scratch = ti.field(float, n)
@@ -114,6 +128,7 @@ def main() -> int:
 
     variants = {
         "full step": full,
+        "full step and the guard": full_and_guard,
         "two kernels, no host work": two_kernels,
         "pair kernel alone": lambda: pairs(dt, solver.red_pairs),
         "kick-drift alone": lambda: kick(dt, dt_prev, w1, w2, solver.red_kick),
@@ -132,7 +147,7 @@ def main() -> int:
         for name, fn in variants.items():
             # the full step runs on from the saved state as a run does (its list rebuilds at their own
             # pace); the kernels alone restart from it every chunk
-            chunk = args.steps if name == "full step" else args.chunk
+            chunk = args.steps if name.startswith("full step") else args.chunk
             rows[name].append(timed(fn, args.steps, chunk, reset))
         print(f"round {k + 1}: " + ", ".join(f"{name} {r[-1]['cpu_over_wall']:.2f}" for name, r in rows.items()),
               flush=True)
@@ -147,7 +162,7 @@ def main() -> int:
          f"{be['precision']}. Produced by `python tools/bench_launch.py` on {time.strftime('%Y-%m-%d')}: "
          f"{_shown(args.config)} ({' '.join(overrides)}), {solver.n_fluid} moving particles, {args.rounds} "
          f"rounds of {args.steps} calls each (chunks of {args.chunk} from one saved state) after {args.warmup} "
-         f"full steps; load {load0:.1f} / {load1:.1f} "
+         f"full steps; the guard's field check every {guard.every} steps; load {load0:.1f} / {load1:.1f} "
          "(1-minute load average at the start / end). Median (range over the rounds)."),
         "",
         "| what runs | wall ms per call | CPU s / wall s | calling thread's CPU ms per call |",
