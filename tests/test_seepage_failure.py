@@ -112,8 +112,9 @@ def test_levee_first_yield_at_the_landside_toe(run_cli, tmp_path):
     4.75 s, three particles, (2.13, 0.05), (2.21, 0.01) and (2.23, 0.01), the most strained (2.23, 0.01),
     1.6 dx from the toe; with the time step halved (timestep.cfl 0.125) the same frame, particles and
     strains' order (the full run at the shipped k: 16.5 s, the same particle; dx 0.01: 11.0 s, (2.245,
-    0.005), 1.6 dx; docs/levee.md); nothing on the riverside slope or the crest. Bound 3 dx: the
-    acceptance."""
+    0.005), 1.6 dx; docs/levee.md); nothing on the riverside slope or the crest. At the physical c_v
+    (the water's default sound speed, 9x the steps, not run here) the same frame and particles yield
+    first (docs/levee.md, "The sequence at the physical c_v"). Bound 3 dx: the acceptance."""
     s1, s2 = tmp_path / "s1.h5", tmp_path / "s2.h5"
     r = run_cli("--config", "configs/embankment.yaml", "--variant", "geostatic", "--set", "dx=0.02",
                 "--out", s1, "--no-progress")
