@@ -87,6 +87,7 @@ def _wcsph_features(cfg, sw: Switches) -> dict:
         "water_sound_speed": cfg.sound_speed(),
         "artificial_viscosity": sw.artificial_viscosity,
         "artificial_viscosity_speed": cfg.viscosity_speed(),
+        "density_diffusion": w.density_diffusion,
         "xsph": w.xsph,
         "variable_h": w.variable_h,
         "cohesion": {"water": w.water.cohesion, "air": w.air.cohesion},

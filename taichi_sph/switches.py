@@ -67,6 +67,8 @@ class Switches:
                                               "particles of that material)")
     artificial_viscosity: bool | None = _switch((WCSPH,), "eq 36 (alpha or beta above zero)")
     xsph: bool | None = _switch((WCSPH,), "eq 53 XSPH correction (wcsph.xsph > 0)")
+    density_diffusion: bool | None = _switch((WCSPH,), "the water's density diffusion (delta-SPH; "
+                                                       "wcsph.density_diffusion above zero)")
     variable_h: bool | None = _switch((WCSPH,), "eq 52 variable smoothing length")
     normalised_density: bool | None = _switch((WCSPH,), "eq 27 density normalisation every normalise_every "
                                                         "steps (wcsph.density: normalised)")
@@ -116,6 +118,7 @@ class Switches:
                    cohesion=(w.water.cohesion > 0.0 and n_water > 0) or (w.air.cohesion > 0.0 and air),
                    artificial_viscosity=w.artificial_viscosity.alpha > 0.0 or w.artificial_viscosity.beta > 0.0,
                    xsph=w.xsph > 0.0,
+                   density_diffusion=w.density_diffusion > 0.0 and n_water > 0,
                    variable_h=bool(w.variable_h),
                    normalised_density=w.density == "normalised",
                    soil=n_soil > 0,

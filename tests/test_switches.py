@@ -45,6 +45,7 @@ WCSPH_FLAGS = {
     "cohesion": lambda s: s.cohesion_on,
     "artificial_viscosity": lambda s: s.av_on,
     "xsph": lambda s: s.xsph_on,
+    "density_diffusion": lambda s: s.dd_on,
     "variable_h": lambda s: s.variable_h,
     "normalised_density": lambda s: s.normalised,
     "soil": lambda s: s.has_soil,

@@ -225,10 +225,10 @@ class WCSPHCase(_Case):
 
     def viscosity_speed(self) -> float:
         """The water's c_ij of the artificial viscosity eq 36 (m/s): `wcsph.artificial_viscosity.speed`, or
-        `flow_sound_speed` (so that its viscosity alpha c h / 8 does not follow the pore water's stiffness)."""
+        c0 (`sound_speed`)."""
         if self.wcsph.artificial_viscosity.speed is not None:
             return self.wcsph.artificial_viscosity.speed
-        return self.flow_sound_speed()
+        return self.sound_speed()
 
 
 def check_isph_water(cfg: ISPHCase) -> None:

@@ -66,10 +66,11 @@ class ArtificialViscosity(Strict):
     beta: NonNegFloat = 0.0
     #: eps_AF of eq 36 (seed: 0.1)
     eps: PosFloat = 0.1
-    #: the water's c_ij of eq 36 (m/s); default the flow's sound speed: wcsph.water.sound_speed if given,
-    #: else speed_factor x expected_speed, never the raise of c0 to the pore water's stiffness (with soil:
-    #: the viscosity alpha c h / 8 grows with c, and at c0 ~ 350 m/s it slowed the levee's seepage front to
-    #: 0.73x; docs/biot.md, "Artificial viscosity and the pore water's sound speed"). Air uses its own c.
+    #: the water's c_ij of eq 36 (m/s); default c0. Its shear viscosity alpha c h / 8 grows with c: where
+    #: soil raises c0 to the pore water's stiffness (~350 m/s at a levee, 20x the flow's) it slowed the
+    #: levee's seepage to 0.73x; the flow's sound speed here (with wcsph.density_diffusion 0.1, without
+    #: which the pore water went unstable at dx 0.01) gives the pinned c0's seepage (docs/biot.md,
+    #: "Artificial viscosity and the pore water's sound speed"). Air uses its own c.
     speed: PosFloat | None = None
 
 
@@ -263,6 +264,15 @@ class WCSPH(Strict):
     density: Literal["normalised", "continuity"] = "normalised"
     #: steps between two applications of eq 27 (density: normalised)
     normalise_every: PosInt = 20
+    #: density diffusion delta of the water (delta-SPH, Molteni & Colagrossi 2009, with the hydrostatic
+    #: part taken out as Fourtakas et al. 2019): d rho_i / dt += delta h c0 sum_j 2 (rho_j - rho_i -
+    #: rho^H_ji) (x_j - x_i) . grad_i W_ij / |x_ij|^2 V_j between water particles, rho^H_ji = rho_w g .
+    #: (x_j - x_i) / c0^2; 0 = off. It damps the water's acoustic noise at the rate of c0 without the shear
+    #: viscosity of eq 36. Inside soil it also spreads the pore pressure at delta h c0, a consolidation
+    #: of its own: keep that well below the soil's c_v (docs/biot.md, "Artificial viscosity and the pore
+    #: water's sound speed": 0.1 with artificial_viscosity.speed at the flow's sound speed runs a levee at
+    #: the physical c_v as with its pinned c0)
+    density_diffusion: NonNegFloat = 0.0
     #: initial water density: `hydrostatic` (from the weight of the fluid above each particle through the
     #: EOS, the run starts at rest in equilibrium) or `uniform` (fluid.density everywhere, as the seed's
     #: collapse cases). Air always starts at the density of the gas EOS at its depth.

@@ -106,7 +106,7 @@ class WCSPHSolver(SolverCommon):
         self.p_amb = w.ambient_pressure
         self.rho_w = cfg.fluid.density
         self.c_w = cfg.sound_speed()
-        self.c_av_w = cfg.viscosity_speed()  # c of eq 36 for water: the flow's, not the pore water's raise
+        self.c_av_w = cfg.viscosity_speed()  # c of eq 36 for water (wcsph.artificial_viscosity.speed)
         self.gamma_w = _exponent(w.water.gamma)
         self.b_w = eos.tait_modulus(self.rho_w, self.c_w, self.gamma_w)
         self.nu_w = cfg.fluid.viscosity
@@ -142,6 +142,10 @@ class WCSPHSolver(SolverCommon):
         self.av_on = sw.artificial_viscosity
         self.xsph_eps = w.xsph
         self.xsph_on = sw.xsph
+        # density diffusion (wcsph.density_diffusion): delta h0 c0, and rho_w / c0^2 for rho^H_ji
+        self.dd_on = sw.density_diffusion
+        self.dd_coef = w.density_diffusion * self.h0 * self.c_w
+        self.dd_h = self.rho_w / self.c_w**2
         self.variable_h = sw.variable_h
         self.normalised = sw.normalised_density
         self.normalise_every = w.normalise_every
@@ -614,7 +618,9 @@ class WCSPHSolver(SolverCommon):
     def _fluid_pass(self, dt):
         """The pair pass at x^{n+1} with v^{n+1/2}, one walk over each fluid particle's neighbours for:
         - continuity: D_i = sum_j V_j (v_j - v_i) . grad_i W_ij (eq 25 in volume form, V_j = m_j / rho_j^n;
-          walls with the virtual velocity of eq 50-51), rho^{n+1} = rho^n (1 - D_i dt) (eq 48),
+          walls with the virtual velocity of eq 50-51; less the density diffusion delta h c0 sum_j 2 (rho_j -
+          rho_i - rho^H_ji) (-dW/dr / r) V_j / rho_i between water particles where wcsph.density_diffusion
+          is on), rho^{n+1} = rho^n (1 - D_i dt) (eq 48),
           h^{n+1} = h^n (1 + D_i dt / d) (eq 52), the XSPH correction (eq 53), then the equations of state
           (eq 39-41); D_i is kept for the next two predictions of `_pack_q`;
         - forces with the predicted rho~, p~ of the view q: eq 34 (pressure; Morris viscosity with
@@ -654,6 +660,7 @@ class WCSPHSolver(SolverCommon):
                 cohi = self._cohesion(ki)
                 acc = self.g
                 div = 0.0
+                dif = 0.0
                 xs = ti.Vector.zero(float, self.dim)
                 # pressure acceleration, and the share of it the walls take through the gradient at i
                 accp = ti.Vector.zero(float, self.dim)
@@ -708,6 +715,11 @@ class WCSPHSolver(SolverCommon):
                         vij = vi - self._vel(sj)
                         mj = sj[self.S_M]
                         div -= mj / sj[self.S_RHO] * vij.dot(gw)
+                        if ti.static(self.dd_on):  # noqa: SIM102 (compile-time if): density diffusion
+                            if ki == WATER and kj == ki:
+                                rho_h = self.dd_h * self.g.dot(-rij)  # hydrostatic rho_j - rho_i
+                                drho = sj[self.S_RHO] - si[self.S_RHO] - rho_h
+                                dif += 2.0 * drho * (-dwdr / r) * mj / sj[self.S_RHO]
                         if ti.static(self.xsph_on):
                             xs += terms.xsph(mj, si[self.S_RHO], sj[self.S_RHO], vij, wij)
                         rhoj = qj[self.Q_RHO]
@@ -729,6 +741,8 @@ class WCSPHSolver(SolverCommon):
                                                              gw)
                             nuj = self._nu(ti.cast(kj, ti.i32))
                             acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nuj, f_ij) * vij
+                if ti.static(self.dd_on):  # d rho / dt = -rho D + delta h c0 dif, written as D
+                    div -= self.dd_coef * dif / si[self.S_RHO]
                 # a_p = A_p + m_wall a_p (the walls' tangential terms carry G_i = -rho_i a_p)
                 acc += walls.wall_mirror_solve(accp, m_wall, hyd_t)
                 self.a[i] = acc
