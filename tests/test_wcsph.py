@@ -133,6 +133,32 @@ def test_one_pass_step_is_stable_for_acoustic_modes():
 
 
 # ---------------------------------------------------------------------------------- whole runs
+def _tank_at_rest(run_cli, tmp_path, floor_bound, *overrides):
+    """configs/hydrostatic.yaml with mode wcsph_biot (30 particles deep, 0.5 s), `overrides` added: from 0.25
+    s on the floor pressure within `floor_bound` of rho g H, the density within 1 % of rho, the speed below
+    1 % of sqrt(g H). Returns the run file's path."""
+    out = tmp_path / "h.h5"
+    sets = [a for o in overrides for a in ("--set", o)]
+    r = run_cli("--config", "configs/hydrostatic.yaml", "--set", "mode=wcsph_biot", "--set", "end_time=0.5",
+                "--set", "output.every=0.05", *sets, "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    H = 0.30
+    with RunFile(out) as rf:
+        water = rf.kind == WATER
+        late = [i for i in range(rf.n_frames) if rf.times[i] >= 0.25]
+        assert len(late) >= 5
+        for i in late:
+            f = rf.frame(i)
+            y = f["position"][water][:, -1]
+            p = f["pressure"][water]
+            bottom = y < y.min() + 0.5 * rf.dx
+            p_floor = np.mean(p[bottom] + RHO * G * y[bottom])
+            assert abs(p_floor / (RHO * G * H) - 1) < floor_bound, (rf.times[i], p_floor)
+            assert np.abs(f["density"][water] / RHO - 1).max() < 0.01
+            assert np.linalg.norm(f["velocity"][water], axis=1).max() < 0.01 * np.sqrt(G * H)
+    return out
+
+
 def test_hydrostatic_tank_wcsph(run_cli, tmp_path):
     """configs/hydrostatic.yaml with mode wcsph_biot (30 particles deep, 0.5 s).
 
@@ -145,25 +171,9 @@ def test_hydrostatic_tank_wcsph(run_cli, tmp_path):
     density, 1 % of sqrt(g H) for the speed (a wall or surface defect reaches tens of percent), and every
     step limited by eq 49's acoustic bound (1) or an output time (5).
     """
-    out = tmp_path / "h.h5"
-    r = run_cli("--config", "configs/hydrostatic.yaml", "--set", "mode=wcsph_biot", "--set", "end_time=0.5",
-                "--set", "output.every=0.05", "--out", out, "--no-progress")
-    assert r.returncode == 0, r.stderr
-    H = 0.30
+    out = _tank_at_rest(run_cli, tmp_path, 0.002)
     with RunFile(out) as rf:
         assert rf.mode == "wcsph_biot"
-        water = rf.kind == WATER
-        late = [i for i in range(rf.n_frames) if rf.times[i] >= 0.25]
-        assert len(late) >= 5
-        for i in late:
-            f = rf.frame(i)
-            y = f["position"][water][:, -1]
-            p = f["pressure"][water]
-            bottom = y < y.min() + 0.5 * rf.dx
-            p_floor = np.mean(p[bottom] + RHO * G * y[bottom])
-            assert abs(p_floor / (RHO * G * H) - 1) < 0.002, (rf.times[i], p_floor)
-            assert np.abs(f["density"][water] / RHO - 1).max() < 0.01
-            assert np.linalg.norm(f["velocity"][water], axis=1).max() < 0.01 * np.sqrt(G * H)
         d = rf.diagnostics()
         assert "cg_iterations" not in d and "dt_limit" in d
         assert set(np.unique(d["dt_limit"]).astype(int)) <= {1, 5}
@@ -176,25 +186,7 @@ def test_hydrostatic_tank_with_density_diffusion(run_cli, tmp_path):
     +0.167 %; the floor row diffuses towards the rows above, the wall pairs carry no diffusion), largest
     density deviation 0.49 %, max speed 0.14 % of sqrt(g H). Bounds: 0.3 % of rho g H (the measured 0.245 %
     and rounding), 1 % for the density and the speed as in the test above."""
-    out = tmp_path / "h.h5"
-    r = run_cli("--config", "configs/hydrostatic.yaml", "--set", "mode=wcsph_biot", "--set", "end_time=0.5",
-                "--set", "output.every=0.05", "--set", "wcsph.density_diffusion=0.1", "--out", out,
-                "--no-progress")
-    assert r.returncode == 0, r.stderr
-    H = 0.30
-    with RunFile(out) as rf:
-        water = rf.kind == WATER
-        late = [i for i in range(rf.n_frames) if rf.times[i] >= 0.25]
-        assert len(late) >= 5
-        for i in late:
-            f = rf.frame(i)
-            y = f["position"][water][:, -1]
-            p = f["pressure"][water]
-            bottom = y < y.min() + 0.5 * rf.dx
-            p_floor = np.mean(p[bottom] + RHO * G * y[bottom])
-            assert abs(p_floor / (RHO * G * H) - 1) < 0.003, (rf.times[i], p_floor)
-            assert np.abs(f["density"][water] / RHO - 1).max() < 0.01
-            assert np.linalg.norm(f["velocity"][water], axis=1).max() < 0.01 * np.sqrt(G * H)
+    _tank_at_rest(run_cli, tmp_path, 0.003, "wcsph.density_diffusion=0.1")
 
 
 def test_dambreak_front_martin_moyce_wcsph(run_cli, tmp_path):
