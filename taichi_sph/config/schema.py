@@ -214,14 +214,7 @@ class WCSPHCase(_Case):
         expected_speed and, with soil, `pore_water_speed`."""
         if self.wcsph.water.sound_speed is not None:
             return self.wcsph.water.sound_speed
-        return max(self.flow_sound_speed(), self.pore_water_speed())
-
-    def flow_sound_speed(self) -> float:
-        """The sound speed the flow alone asks for (m/s): the key, or speed_factor x expected_speed; without
-        the raise to `pore_water_speed`."""
-        if self.wcsph.water.sound_speed is not None:
-            return self.wcsph.water.sound_speed
-        return self.wcsph.water.speed_factor * self.expected_speed()
+        return max(self.wcsph.water.speed_factor * self.expected_speed(), self.pore_water_speed())
 
     def viscosity_speed(self) -> float:
         """The water's c_ij of the artificial viscosity eq 36 (m/s): `wcsph.artificial_viscosity.speed`, or
