@@ -81,6 +81,10 @@ class Solver(Protocol):
     def max_speed_bound(self) -> float:
         """The speed above which the guard stops the run (m/s)."""
 
+    def max_pore_pressure_bound(self) -> float | None:
+        """The pore-pressure magnitude of a soil particle above which the guard stops the run (Pa); None:
+        no bound (no soil with a pore pressure)."""
+
     def state(self) -> dict:
         """The whole state, for a checkpoint (sph/state.py)."""
 

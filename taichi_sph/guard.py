@@ -3,7 +3,8 @@
 Causes and their families (exit codes in taichi_sph/errors.py):
 - non-finite position, velocity, pressure or density (`nonfinite`, exit 4);
 - speed above guard.max_speed, density ratio rho / rho_ref outside [guard.min_density_ratio,
-  guard.max_density_ratio], neighbour-list overflow (`bounds`, exit 3);
+  guard.max_density_ratio], a soil particle's pore pressure beyond guard.max_pore_pressure in magnitude,
+  neighbour-list overflow (`bounds`, exit 3);
 - pressure solver (CG) diverged or not converged, adaptive time step below timestep.min (`solver`, exit 5);
 - particles leaving the domain when guard.out_of_domain is `error` (else removed, counted, warned),
   a wall particle that moved, water or air inside a wall when guard.wall_crossing is `error` (else
@@ -13,7 +14,7 @@ Every message has the same shape: "step S, t = T s: <quantity> ... (particle ids
 helpers of taichi_sph/instability.py (re-exported here) at the places they detect a cause inside a step
 (cheap reductions already in their kernels); the driver calls StabilityGuard.after_step every step (speed) and StabilityGuard.check_fields
 every guard.every steps and on every frame (the host-side checks: non-finite, density ratio, walls at
-rest, fluid inside walls).
+rest, fluid inside walls, pore pressure).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from .instability import (  # noqa: F401  (the solvers call them as guard.*)
     time_step_error,
     where,
 )
-from .kinds import AIR, WALL, WATER
+from .kinds import AIR, SOIL, WALL, WATER
 
 log = logging.getLogger("taichi_sph")
 
@@ -51,16 +52,21 @@ WALL_CROSSING_DEPTH = 0.5
 class StabilityGuard:
     """Host-side checks the driver makes; built once per run from the config and the scene's kinds."""
 
-    def __init__(self, cfg, kind: np.ndarray, rho_ref: np.ndarray, speed_bound: float, body=None, motions=()):
+    def __init__(self, cfg, kind: np.ndarray, rho_ref: np.ndarray, speed_bound: float, body=None, motions=(),
+                 pore_pressure_bound: float | None = None):
         g = cfg.guard
         self.every = g.every
         self.speed_bound = float(speed_bound)
+        self.pore_bound = pore_pressure_bound
+        #: the largest pore-pressure magnitude of a soil particle at any full check (Pa)
+        self.pore_max = 0.0
         self.max_ratio = g.max_density_ratio or DEFAULT_MAX_DENSITY_RATIO[cfg.mode]
         self.min_ratio = g.min_density_ratio
         self.kind = np.asarray(kind)
         self.rho_ref = np.asarray(rho_ref, dtype=float)
         # density ratio of water and air only (soil has its own density and no such bound here)
         self.fluid = np.isin(self.kind, (WATER, AIR))
+        self.soil = self.kind == SOIL
         self.wall = self.kind == WALL
         self.wall_tol = WALL_TOLERANCE * cfg.dx
         self.wall0 = None
@@ -106,9 +112,9 @@ class StabilityGuard:
                 family="bounds" if math.isfinite(speed) else "nonfinite")
 
     def check_fields(self, step: int, time: float, fields: dict) -> None:
-        """Non-finite state, density ratio of fluid particles, walls at rest, fluid inside walls (fields in
-        id order: a frame's, or the solver's guard_fields, whose `finite` says per particle whether its
-        position, velocity, pressure and density are finite)."""
+        """Non-finite state, density ratio of fluid particles, pore pressure of soil particles, walls at rest,
+        fluid inside walls (fields in id order: a frame's, or the solver's guard_fields, whose `finite` says
+        per particle whether its position, velocity, pressure and density are finite)."""
         active = np.asarray(fields["active"], dtype=bool)
         if "finite" in fields:
             bad = ~np.asarray(fields["finite"], dtype=bool)
@@ -136,6 +142,7 @@ class StabilityGuard:
                     f"{where(step, time)}: density ratio {ratio[worst]:.4g} beyond the bound {bound:g} "
                     f"(guard.{name}) at {len(ids)} particle(s) (particle ids {ids_text(ids)})", step=step,
                     time=time, quantity="density ratio", particles=ids, family="bounds")
+        self.check_pore_pressure(step, time, fields, active)
         if self.wall0 is not None and len(self.wall0):
             expected = self.wall0 + self._wall_displacement(time) if self.motions else self.wall0
             off = np.asarray(fields["position"])[self.wall] - expected
@@ -150,6 +157,29 @@ class StabilityGuard:
                     + (" off their prescribed motion" if self.motions else ""),
                     step=step, time=time, quantity="wall position", particles=ids, family="domain")
         self.check_wall_crossing(step, time, fields)
+
+    def check_pore_pressure(self, step: int, time: float, fields: dict, active: np.ndarray) -> None:
+        """Stop when a soil particle's pore pressure (its `pressure`, mode wcsph_biot) exceeds the bound in
+        magnitude. Where soil raises the water's sound speed (~350 m/s at a levee), a pressure wave growing
+        in the pore water changes its density by less than 1e-3 and moves it at under 1 m/s: neither the
+        density ratio nor the speed bound sees it, while its pressure reaches tens of times the weight of
+        the soil above it, which a pore pressure at rest cannot exceed."""
+        check = active & self.soil
+        if "pressure" not in fields or not check.any():
+            return
+        p = np.asarray(fields["pressure"], dtype=float)
+        mag = np.abs(p)
+        self.pore_max = max(self.pore_max, float(mag[check].max()))
+        if self.pore_bound is None:
+            return
+        hit = check & (mag > self.pore_bound)
+        if hit.any():
+            ids = np.flatnonzero(hit)
+            worst = ids[np.argmax(mag[ids])]
+            raise InstabilityError(
+                f"{where(step, time)}: pore pressure {p[worst]:.4g} Pa beyond the bound {self.pore_bound:.4g} Pa "
+                f"(guard.max_pore_pressure) at {len(ids)} soil particle(s) (particle ids {ids_text(ids)})",
+                step=step, time=time, quantity="pore pressure", particles=ids, family="bounds")
 
     def check_wall_crossing(self, step: int, time: float, fields: dict) -> None:
         """Count the active water and air particles inside a wall (WallFaces.depth > WALL_CROSSING_DEPTH dx):

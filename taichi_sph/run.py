@@ -202,7 +202,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
     guard = None
     try:
         guard = StabilityGuard(cfg, scene.kind, _reference_density(solver, scene.kind), solver.max_speed_bound(),
-                               scene.body, scene.motions)
+                               scene.body, scene.motions, solver.max_pore_pressure_bound())
         every = cfg.output.every
         if saved is None:
             first = solver.initial_diagnostics()
@@ -324,6 +324,10 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             most = max(guard.crossed_max, int(writer.file.attrs.get("wall_crossings_max", 0)))
             summary["wall_crossings_max"] = most
             writer.set_attrs(wall_crossings_max=most)
+            # largest pore-pressure magnitude of a soil particle at one full check (Pa), and the bound (0: none)
+            most = max(guard.pore_max, float(writer.file.attrs.get("pore_pressure_max", 0.0)))
+            summary["pore_pressure_max"] = most
+            writer.set_attrs(pore_pressure_max=most, pore_pressure_bound=guard.pore_bound or 0.0)
         writer.set_attrs(status=summary["status"], exit_reason=summary.get("error", ""), steps=steps,
                          wall_seconds=wall, step_seconds=step_wall, mipps=psps / 1e6,
                          removed_particles=solver.removed_total)

@@ -69,9 +69,11 @@ def test_built_solvers_satisfy_the_contract(ti_cpu, mode):
     # non-finite position, velocity, pressure or density: here none; then one particle's velocity is made
     # NaN and exactly its id is flagged
     checked = solver.guard_fields()
-    assert set(checked) == {"position", "density", "finite", "active"}
+    assert set(checked) == {"position", "density", "pressure", "finite", "active"}
     for key in ("position", "density", "active"):
         assert np.array_equal(checked[key], fields[key]), key
+    # pressure: the frames give walls their interpolated wall pressure, the guard reads none of them
+    assert np.array_equal(checked["pressure"][~wall], fields["pressure"][~wall])
     assert checked["finite"].all()
     ids = solver.ids.to_numpy()
     v = solver.v.to_numpy()

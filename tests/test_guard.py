@@ -80,6 +80,31 @@ def test_density_ratio_bounds_exit_3():
     assert exc.particles == [0] and "guard.min_density_ratio" in str(exc)
 
 
+def test_pore_pressure_bound_exit_3():
+    """guard.max_pore_pressure: the magnitude of a soil particle's pore pressure (its `pressure`); water,
+    air and wall particles and removed soil particles are not checked; the largest magnitude seen is kept
+    (run attribute pore_pressure_max)."""
+    kind = np.array([0, 2, 2, 1, 2, 3])  # water, soil, soil, wall, soil, air
+    g = StabilityGuard(_cfg(), kind, RHO_REF, speed_bound=5.0, pore_pressure_bound=1.0e4)
+    g.start(_fields())
+    f = _fields()
+    f["density"][[1, 2, 4]] = 1000.0  # the soil's density is not checked; keep the fields quiet
+    f["pressure"][:] = [5.0e4, 9.0e3, -9.5e3, 5.0e4, 0.0, 5.0e4]  # water, wall and air beyond it: not checked
+    g.check_fields(3, 0.2, f)
+    assert g.pore_max == 9.5e3
+    f["pressure"][4], f["active"][4] = 2.0e4, False
+    g.check_fields(3, 0.2, f)
+    f["pressure"][2], f["active"][4] = -1.2e4, True
+    exc = _raised(lambda: g.check_fields(4, 0.3, f))
+    assert exc.exit_code == 3 and exc.quantity == "pore pressure" and exc.particles == [2, 4]
+    assert "pore pressure 2e+04 Pa beyond the bound 1e+04 Pa (guard.max_pore_pressure) at 2 soil" in str(exc)
+    # no bound (no soil, or mode isph): nothing stops, the largest magnitude is still kept
+    g = StabilityGuard(_cfg(), kind, RHO_REF, speed_bound=5.0)
+    g.start(_fields())
+    g.check_fields(4, 0.3, f)
+    assert g.pore_max == 2.0e4
+
+
 def test_moving_wall_exits_6():
     f = _fields()
     f["position"][4, 0] += 1e-3  # 0.1 dx
@@ -244,3 +269,29 @@ def test_dt_ten_times_the_limit_stops_named(run_cli, tmp_path, case):
         assert np.flatnonzero(last["flag"]).tolist() == sorted(ids.tolist())  # the named particles, flagged
         assert not rf.frame(0)["flag"].any()
         assert abs(rf.times[-1] - float(m.group(2))) < 1e-6
+
+
+def test_pore_pressure_bound_stops_a_run_at_the_deep_soil(run_cli, tmp_path):
+    """configs/soil_column.yaml (saturated, 0.30 m of soil and water) with guard.max_pore_pressure at half
+    the hydrostatic pore pressure of its floor, rho_w g H / 2: the first full check stops the run (exit 3,
+    the quantity named) and flags exactly the soil particles deeper than H / 2, where rho_w g z passes the
+    bound, give or take the row at that depth (pressure within a few % of hydrostatic, so one row
+    spacing either side)."""
+    H, dx, rho_g = 0.30, 0.01, 1000.0 * 9.81
+    out = tmp_path / "p.h5"
+    r = run_cli("--config", "configs/soil_column.yaml", "--set", f"guard.max_pore_pressure={0.5 * rho_g * H:g}",
+                "--out", out, "--no-progress")
+    assert r.returncode == 3, r.stderr
+    assert "Traceback" not in r.stderr
+    line = [ln for ln in r.stderr.splitlines() if ln.startswith("taichi-sph: unstable:")]
+    assert len(line) == 1 and "pore pressure" in line[0] and "guard.max_pore_pressure" in line[0], r.stderr
+    with RunFile(out) as rf:
+        assert rf.attrs["status"] == "unstable" and rf.attrs["unstable_quantity"] == "pore pressure"
+        assert rf.n_frames == 2  # frame 0 and the state that stopped the run
+        last = rf.frame(1)
+        y = last["position"][:, -1]
+        flagged = last["flag"].astype(bool)
+        soil = rf.kind == 2
+        assert flagged.any() and soil[flagged].all()
+        assert y[flagged].max() < H / 2 + dx
+        assert flagged[soil & (y < H / 2 - dx)].all()

@@ -225,13 +225,16 @@ class WCSPHCase(_Case):
 
 
 def check_isph_water(cfg: ISPHCase) -> None:
-    """At least one water block; the keys of water blocks that only mode wcsph_biot reads are errors."""
+    """At least one water block; the keys of water blocks (and the guard's) that only mode wcsph_biot reads
+    are errors."""
     if not cfg.water:
         fail("water", "needs at least one water block (mode wcsph_biot may have soil blocks instead)")
     for k, block in enumerate(cfg.water):
         for key in ("start_head", "inside_soil", "outside_soil"):
             if getattr(block, key) not in (None, False):
                 fail(f"water[{k}].{key}", f"applies to mode wcsph_biot only (mode is {cfg.mode})")
+    if cfg.guard.max_pore_pressure is not None:  # mode isph's soil markers carry no pore pressure
+        fail("guard.max_pore_pressure", f"applies to mode wcsph_biot only (mode is {cfg.mode})")
 
 
 def check_wcsph_fluids(cfg: WCSPHCase) -> None:

@@ -41,23 +41,23 @@ class SolverCommon:
 
     def guard_fields(self) -> dict:
         """What the guard's full check reads (guard.check_fields) every `guard.every` steps, in id order:
-        position, density (the water's at wall particles, as fields_by_id reports), active, and `finite`:
-        whether position, velocity, pressure and density are all finite (all the check asks of velocity
-        and pressure). One kernel packs them by particle id into one array, read in one transfer: at the
+        position, density (the water's at wall particles, as fields_by_id reports), pressure, active, and
+        `finite`: whether position, velocity, pressure and density are all finite (all the check asks of
+        velocity). One kernel packs them by particle id into one array, read in one transfer: at the
         20k dam break (wcsph) the check every tenth step cost 0.32 ms a step, 11 % of the run, when each
         field was read and put in id order on the host."""
         n, dim = self.n, self.dim
         if getattr(self, "_guard_out", None) is None:
-            self._guard_out = np.empty((n, dim + 3), dtype=np.float64)
+            self._guard_out = np.empty((n, dim + 4), dtype=np.float64)
         out = self._guard_out
         self._k_guard_pack(out, getattr(self, self.density_field))
         return {"position": out[:, :dim].copy(), "density": out[:, dim].copy(), "finite": out[:, dim + 1] > 0.5,
-                "active": out[:, dim + 2] > 0.5}
+                "active": out[:, dim + 2] > 0.5, "pressure": out[:, dim + 3].copy()}
 
     @ti.kernel
     def _k_guard_pack(self, out: ti.types.ndarray(dtype=ti.f64, ndim=2), rho: ti.template()):
         """Row ids[i] of `out`: x_i, the density the guard checks (rho_w at wall particles), 1 where x, v, p
-        and rho are all finite, active."""
+        and rho are all finite, active, p_i."""
         for i in range(self.n):
             k = self.ids[i]
             for d in ti.static(range(self.dim)):
@@ -68,6 +68,7 @@ class SolverCommon:
             val = ti.cast(self.x[i].sum() + self.v[i].sum() + self.p[i], ti.f64) + r
             out[k, ti.static(self.dim + 1)] = 0.0 if (ti.math.isnan(val) or ti.math.isinf(val)) else 1.0
             out[k, ti.static(self.dim + 2)] = ti.cast(self.active[i] != 0, ti.f64)
+            out[k, ti.static(self.dim + 3)] = ti.cast(self.p[i], ti.f64)
 
     def max_speed_bound(self) -> float:
         """Speed above which the guard stops the run: `guard.max_speed`, or 20 sqrt(g H) with H the tank's
@@ -76,6 +77,10 @@ class SolverCommon:
             return self.cfg.guard.max_speed
         height = float(self.cfg.tank.size[-1])
         return 20.0 * math.sqrt(self.g_abs * height) if self.g_abs > 0 else 100.0
+
+    def max_pore_pressure_bound(self) -> float | None:
+        """No pore pressure on soil particles by default (mode wcsph_biot overrides it)."""
+        return None
 
     def _tick(self, key: str, t0: float) -> float:
         """Add the time since t0 to phase `key`; return now (the start of the next phase)."""

@@ -872,6 +872,30 @@ class WCSPHSolver(SolverCommon):
             raise guard.time_step_error(self.step_count, self.time, limits[which], ts.min, "eq 49")
         return limits[which], which
 
+    #: guard.max_pore_pressure when not given: this multiple of pore_pressure_scale(). The shipped soil cases
+    #: reach at most 0.71 of the scale at any step (the dry levee's sudden river rise, dx 0.02); the pore-water
+    #: bursts it is there for, 5-25 (docs/biot.md, "The guard's pore-pressure bound")
+    pore_pressure_factor = 3.0
+
+    def pore_pressure_scale(self) -> float:
+        """g H (rho_w + (1 - n) rho_s) + |u0|, H the tank's height: the total vertical stress at the floor of
+        a tank full of saturated soil, the most a pore pressure at rest can carry, plus the largest initial
+        excess pore pressure u0 (wcsph.soil.initial_excess_pressure)."""
+        sp = self.cfg.wcsph.soil
+        rho = self.rho_w + (1.0 - sp.porosity) * sp.grain_density
+        excess = abs(sp.initial_excess_pressure.amplitude) if sp.initial_excess_pressure is not None else 0.0
+        return rho * self.g_abs * float(self.cfg.tank.size[-1]) + excess
+
+    def max_pore_pressure_bound(self) -> float | None:
+        """Pore-pressure magnitude (Pa) of a soil particle above which the guard stops the run:
+        `guard.max_pore_pressure`, or pore_pressure_factor x pore_pressure_scale(); None without soil or
+        (by default) without gravity."""
+        if not self.has_soil:
+            return None
+        if self.cfg.guard.max_pore_pressure is not None:
+            return self.cfg.guard.max_pore_pressure
+        return self.pore_pressure_factor * self.pore_pressure_scale() if self.g_abs > 0.0 else None
+
     # ------------------------------------------------------------------ output
     def fields_by_id(self) -> dict:
         """Per-particle arrays in id order (SPEC 8 frame fields); pressures relative to the ambient."""
