@@ -69,6 +69,8 @@ class Switches:
     xsph: bool | None = _switch((WCSPH,), "eq 53 XSPH correction (wcsph.xsph > 0)")
     density_diffusion: bool | None = _switch((WCSPH,), "the water's density diffusion (delta-SPH; "
                                                        "wcsph.density_diffusion above zero)")
+    density_diffusion_gradient: bool | None = _switch((WCSPH,), "the density diffusion's gradient correction "
+                                                                "(wcsph.density_diffusion_form: gradient)")
     variable_h: bool | None = _switch((WCSPH,), "eq 52 variable smoothing length")
     normalised_density: bool | None = _switch((WCSPH,), "eq 27 density normalisation every normalise_every "
                                                         "steps (wcsph.density: normalised)")
@@ -119,6 +121,8 @@ class Switches:
                    artificial_viscosity=w.artificial_viscosity.alpha > 0.0 or w.artificial_viscosity.beta > 0.0,
                    xsph=w.xsph > 0.0,
                    density_diffusion=w.density_diffusion > 0.0 and n_water > 0,
+                   density_diffusion_gradient=(w.density_diffusion > 0.0 and n_water > 0
+                                               and w.density_diffusion_form == "gradient"),
                    variable_h=bool(w.variable_h),
                    normalised_density=w.density == "normalised",
                    soil=n_soil > 0,

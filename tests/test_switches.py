@@ -46,6 +46,7 @@ WCSPH_FLAGS = {
     "artificial_viscosity": lambda s: s.av_on,
     "xsph": lambda s: s.xsph_on,
     "density_diffusion": lambda s: s.dd_on,
+    "density_diffusion_gradient": lambda s: s.dd_grad,
     "variable_h": lambda s: s.variable_h,
     "normalised_density": lambda s: s.normalised,
     "soil": lambda s: s.has_soil,

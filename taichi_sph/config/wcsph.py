@@ -273,6 +273,13 @@ class WCSPH(Strict):
     #: water's sound speed": 0.1 with artificial_viscosity.speed at the flow's sound speed runs a levee at
     #: the physical c_v as with its pinned c0)
     density_diffusion: NonNegFloat = 0.0
+    #: the difference the density diffusion acts on: `hydrostatic`, rho_j - rho_i - rho^H_ji (Fourtakas et
+    #: al. 2019), a Laplacian: inside soil it consolidates the pore pressure at delta h c0; `gradient`, that
+    #: difference less (G_i + G_j) . (x_j - x_i) / 2 with G the renormalised gradient of rho - rho^H from the
+    #: last pair pass (Antuono et al. 2010), which vanishes on a linear field: a fourth-order damping that
+    #: leaves a smooth pore-pressure field (wavelength L) alone to order (h / L)^2 and still damps the
+    #: particle-scale noise (docs/biot.md, "Density diffusion with the gradient correction")
+    density_diffusion_form: Literal["hydrostatic", "gradient"] = "hydrostatic"
     #: initial water density: `hydrostatic` (from the weight of the fluid above each particle through the
     #: EOS, the run starts at rest in equilibrium) or `uniform` (fluid.density everywhere, as the seed's
     #: collapse cases). Air always starts at the density of the gas EOS at its depth.

@@ -65,6 +65,10 @@ _NRED = 9
 #: largest timestep.cfl at which the one-pass step damps every acoustic mode: z = omega dt < 0.708 with the
 #: fastest lattice mode omega = c G_max, G_max dx = 0.901 (2D) / 0.923 (3D), dt = cfl 1.2 dx / c
 CFL_STABLE = 0.64
+#: the density diffusion's gradient correction takes G_i = B_i^-1 sum_j (...) only where det B_i exceeds this
+#: (B = I in a full support; a particle at a free surface has about half of it, det ~ 0.5 in 2D; a
+#: fragment of water fewer neighbours still): elsewhere G_i = 0, the hydrostatic form
+DD_GRAD_MIN_DET = 0.25
 #: scenes with fewer fluid particles run their loops serially: thread dispatch costs ~55 us per loop.
 #: Measured per step on 2 cores, serial / parallel: 500 particles 0.44 / 0.67 ms, 1200 0.77 / 0.91 ms,
 #: 2450 equal; 5000 (dam break, dx 2 cm) 1.27 / 0.99 ms
@@ -146,6 +150,8 @@ class WCSPHSolver(SolverCommon):
         self.dd_on = sw.density_diffusion
         self.dd_coef = w.density_diffusion * self.h0 * self.c_w
         self.dd_h = self.rho_w / self.c_w**2
+        # its gradient correction: G of the last pair pass, packed into s for the neighbours
+        self.dd_grad = sw.density_diffusion_gradient
         self.variable_h = sw.variable_h
         self.normalised = sw.normalised_density
         self.normalise_every = w.normalise_every
@@ -181,6 +187,8 @@ class WCSPHSolver(SolverCommon):
         self.S_KIND = 2 * dim + 2
         self.S_H = 2 * dim + 3
         self.ns = 2 * dim + 3 + (1 if self.variable_h else 0)
+        self.S_G = self.ns  # the density diffusion's gradient G (dim), with its gradient correction only
+        self.ns += dim if self.dd_grad else 0
         self.Q_RHO, self.Q_PR, self.Q_H = 0, 1, 2
         self.nq = 3 if self.variable_h else 2
         # small scenes run their loops serially on the CPU: a parallel loop costs ~50 us of thread dispatch
@@ -232,6 +240,12 @@ class WCSPHSolver(SolverCommon):
         self.group = ti.field(ti.i32, n if self.has_soil else 1)  # the list order of a neighbour (_k_mask)
         self.particle_fields = [self.x, self.v, self.a, self.xs, self.rate, self.normal, self.rho, self.p,
                                 self.h, self.m, self.wdepth, self.kind, self.ids, self.active]
+        # renormalised gradient of rho - rho^H at water particles, from the last pair pass (density diffusion's
+        # gradient correction)
+        self.grad_rho = vec(dim, float, n if self.dd_grad else 1)
+        if self.dd_grad:
+            self.particle_fields.append(self.grad_rho)
+            self.state_fields = (*type(self).state_fields, "grad_rho")
         # soil state and passes (soil_step.py); its fields are one element long in a scene without soil
         self.soil = SoilPasses(self, cfg, scene)
         self.particle_fields += self.soil.particle_fields
@@ -405,6 +419,9 @@ class WCSPHSolver(SolverCommon):
         self.s[i][self.S_KIND] = ti.cast(self.kind[i], float)
         if ti.static(self.variable_h):
             self.s[i][self.S_H] = ti.cast(self.h[i], float)
+        if ti.static(self.dd_grad):
+            for d in ti.static(range(self.dim)):
+                self.s[i][self.S_G + d] = self.grad_rho[i][d]
 
     @ti.func
     def _pack_q(self, i, dt, w1, w2):
@@ -620,7 +637,9 @@ class WCSPHSolver(SolverCommon):
         - continuity: D_i = sum_j V_j (v_j - v_i) . grad_i W_ij (eq 25 in volume form, V_j = m_j / rho_j^n;
           walls with the virtual velocity of eq 50-51; less the density diffusion delta h c0 sum_j 2 (rho_j -
           rho_i - rho^H_ji) (-dW/dr / r) V_j / rho_i between water particles where wcsph.density_diffusion
-          is on), rho^{n+1} = rho^n (1 - D_i dt) (eq 48),
+          is on, with its gradient correction -(G_i + G_j) . (x_j - x_i) / 2 in the bracket where
+          density_diffusion_form is `gradient`, G from the last pass, the new G_i written for the next),
+          rho^{n+1} = rho^n (1 - D_i dt) (eq 48),
           h^{n+1} = h^n (1 + D_i dt / d) (eq 52), the XSPH correction (eq 53), then the equations of state
           (eq 39-41); D_i is kept for the next two predictions of `_pack_q`;
         - forces with the predicted rho~, p~ of the view q: eq 34 (pressure; Morris viscosity with
@@ -661,6 +680,15 @@ class WCSPHSolver(SolverCommon):
                 acc = self.g
                 div = 0.0
                 dif = 0.0
+                # the density diffusion's gradient correction: G_i of the last pass, and this pass's sums for
+                # the new one, B = sum_j V_j grad_i W_ij (x_j - x_i)^T and sum_j (rho_j - rho_i - rho^H_ji)
+                # grad_i W_ij V_j
+                g_old = ti.Vector.zero(float, self.dim)
+                g_sum = ti.Vector.zero(float, self.dim)
+                b_mat = ti.Matrix.zero(float, self.dim, self.dim)
+                if ti.static(self.dd_grad):
+                    for d in ti.static(range(self.dim)):
+                        g_old[d] = si[self.S_G + d]
                 xs = ti.Vector.zero(float, self.dim)
                 # pressure acceleration, and the share of it the walls take through the gradient at i
                 accp = ti.Vector.zero(float, self.dim)
@@ -719,7 +747,15 @@ class WCSPHSolver(SolverCommon):
                             if ki == WATER and kj == ki:
                                 rho_h = self.dd_h * self.g.dot(-rij)  # hydrostatic rho_j - rho_i
                                 drho = sj[self.S_RHO] - si[self.S_RHO] - rho_h
-                                dif += 2.0 * drho * (-dwdr / r) * mj / sj[self.S_RHO]
+                                vj = mj / sj[self.S_RHO]
+                                if ti.static(self.dd_grad):
+                                    g_sum += drho * vj * gw
+                                    b_mat += vj * gw.outer_product(-rij)
+                                    g_j = ti.Vector.zero(float, self.dim)
+                                    for d in ti.static(range(self.dim)):
+                                        g_j[d] = sj[self.S_G + d]
+                                    drho -= 0.5 * (g_old + g_j).dot(-rij)
+                                dif += 2.0 * drho * (-dwdr / r) * vj
                         if ti.static(self.xsph_on):
                             xs += terms.xsph(mj, si[self.S_RHO], sj[self.S_RHO], vij, wij)
                         rhoj = qj[self.Q_RHO]
@@ -743,6 +779,11 @@ class WCSPHSolver(SolverCommon):
                             acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nuj, f_ij) * vij
                 if ti.static(self.dd_on):  # d rho / dt = -rho D + delta h c0 dif, written as D
                     div -= self.dd_coef * dif / si[self.S_RHO]
+                if ti.static(self.dd_grad):  # G_i = B^-1 sum: exact on a linear field; none where B is
+                    g_new = ti.Vector.zero(float, self.dim)  # far from I (a free surface, few neighbours)
+                    if ki == WATER and dt > 0.0 and b_mat.determinant() > DD_GRAD_MIN_DET:
+                        g_new = b_mat.inverse() @ g_sum
+                    self.grad_rho[i] = g_new
                 # a_p = A_p + m_wall a_p (the walls' tangential terms carry G_i = -rho_i a_p)
                 acc += walls.wall_mirror_solve(accp, m_wall, hyd_t)
                 self.a[i] = acc
