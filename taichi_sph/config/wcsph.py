@@ -68,9 +68,9 @@ class ArtificialViscosity(Strict):
     eps: PosFloat = 0.1
     #: the water's c_ij of eq 36 (m/s); default c0. Its shear viscosity alpha c h / 8 grows with c: where
     #: soil raises c0 to the pore water's stiffness (~350 m/s at a levee, 20x the flow's) it slowed the
-    #: levee's seepage to 0.73x; the flow's sound speed here (with wcsph.density_diffusion 0.1, without
-    #: which the pore water went unstable at dx 0.01) gives the pinned c0's seepage (docs/biot.md,
-    #: "Artificial viscosity and the pore water's sound speed"). Air uses its own c.
+    #: levee's seepage to 0.73x; the flow's sound speed here (with wcsph.density_diffusion 0.1 in its
+    #: gradient form, without which the pore water burst at dx 0.01) gives the pinned c0's seepage
+    #: (docs/biot.md, "Artificial viscosity and the pore water's sound speed"). Air uses its own c.
     speed: PosFloat | None = None
 
 
@@ -268,10 +268,11 @@ class WCSPH(Strict):
     #: part taken out as Fourtakas et al. 2019): d rho_i / dt += delta h c0 sum_j 2 (rho_j - rho_i -
     #: rho^H_ji) (x_j - x_i) . grad_i W_ij / |x_ij|^2 V_j between water particles, rho^H_ji = rho_w g .
     #: (x_j - x_i) / c0^2; 0 = off. It damps the water's acoustic noise at the rate of c0 without the shear
-    #: viscosity of eq 36. Inside soil it also spreads the pore pressure at delta h c0, a consolidation
-    #: of its own: keep that well below the soil's c_v (docs/biot.md, "Artificial viscosity and the pore
-    #: water's sound speed": 0.1 with artificial_viscosity.speed at the flow's sound speed runs a levee at
-    #: the physical c_v as with its pinned c0)
+    #: viscosity of eq 36. In this (hydrostatic) form it also spreads the pore pressure inside soil at
+    #: delta h c0, a consolidation of its own; density_diffusion_form `gradient` does not (docs/biot.md,
+    #: "Artificial viscosity and the pore water's sound speed": 0.1 in the gradient form with
+    #: artificial_viscosity.speed at the flow's sound speed runs a levee at the physical c_v as with its
+    #: pinned c0)
     density_diffusion: NonNegFloat = 0.0
     #: the difference the density diffusion acts on: `hydrostatic`, rho_j - rho_i - rho^H_ji (Fourtakas et
     #: al. 2019), a Laplacian: inside soil it consolidates the pore pressure at delta h c0; `gradient`, that

@@ -914,8 +914,8 @@ class WCSPHSolver(SolverCommon):
         return limits[which], which
 
     #: guard.max_pore_pressure when not given: this multiple of pore_pressure_scale(). The shipped soil cases
-    #: reach at most 0.71 of the scale at any step (the dry levee's sudden river rise, dx 0.02); the pore-water
-    #: bursts it is there for, 5-25 (docs/biot.md, "The guard's pore-pressure bound")
+    #: reach at most 1.82 of the scale (one particle at the dry levee's toe as the river is put against it,
+    #: dx 0.01); the pore-water bursts it is there for, 5-25 (docs/biot.md, "The guard's pore-pressure bound")
     pore_pressure_factor = 3.0
 
     def pore_pressure_scale(self) -> float:
