@@ -87,7 +87,7 @@ def _wcsph_features(cfg, sw: Switches) -> dict:
         "water_sound_speed": cfg.sound_speed(),
         "artificial_viscosity": sw.artificial_viscosity,
         "artificial_viscosity_speed": cfg.viscosity_speed(),
-        "density_diffusion": w.density_diffusion,
+        "density_diffusion": cfg.density_diffusion(),
         "density_diffusion_form": w.density_diffusion_form,
         "xsph": w.xsph,
         "variable_h": w.variable_h,

@@ -120,8 +120,8 @@ class Switches:
                    cohesion=(w.water.cohesion > 0.0 and n_water > 0) or (w.air.cohesion > 0.0 and air),
                    artificial_viscosity=w.artificial_viscosity.alpha > 0.0 or w.artificial_viscosity.beta > 0.0,
                    xsph=w.xsph > 0.0,
-                   density_diffusion=w.density_diffusion > 0.0 and n_water > 0,
-                   density_diffusion_gradient=(w.density_diffusion > 0.0 and n_water > 0
+                   density_diffusion=cfg.density_diffusion() > 0.0 and n_water > 0,
+                   density_diffusion_gradient=(cfg.density_diffusion() > 0.0 and n_water > 0
                                                and w.density_diffusion_form == "gradient"),
                    variable_h=bool(w.variable_h),
                    normalised_density=w.density == "normalised",

@@ -114,7 +114,7 @@ def test_levee_first_yield_at_the_landside_toe(run_cli, tmp_path):
     strains' order (the full run at the shipped k: 16.5 s, the same particle; dx 0.01: 11.0 s, (2.245,
     0.005), 1.6 dx; docs/levee.md); nothing on the riverside slope or the crest. At the physical c_v
     (the water's default sound speed, with eq 36 at the flow's 17.2 m/s and density diffusion 0.1 in
-    either form; 9x the steps, not run here) the same frame and particles yield first (docs/levee.md, "The sequence at the
+    either form, the first the defaults; 9x the steps, not run here) the same frame and particles yield first (docs/levee.md, "The sequence at the
     physical c_v"). Bound 3 dx: the acceptance."""
     s1, s2 = tmp_path / "s1.h5", tmp_path / "s2.h5"
     r = run_cli("--config", "configs/embankment.yaml", "--variant", "geostatic", "--set", "dx=0.02",
@@ -163,12 +163,12 @@ def test_dry_levee_wetting_front_follows_boussinesq(run_cli, tmp_path):
     face is still filling. The advance is slower than linear: x_f = a + b t^p gives p = 0.37 (0.34-0.35
     in the full runs; Boussinesq 0.5); checked as a speed over 2.2-4 s below that over 0.4-2.2 s.
     The sound speed is a knob the front must not follow: the same case to 2.2 s at the water's default
-    sound speed (351.5 m/s, K_f = 40 M: the physical c_v, 7.5x the steps) with eq 36 at the flow's sound
-    speed (artificial_viscosity.speed 17.2 m/s) and density diffusion 0.1 in its gradient form, the
-    settings docs/biot.md gives for it, advances 0.183 m from 0.4 s against 0.182 m at the pinned 17.2 m/s
-    (-34 % against S = n; the hydrostatic form of the diffusion 0.183 m too).
-    Bound: one particle spacing (the front is one particle's position). With the defaults (eq 36 at the
-    raised c0, its shear viscosity 20x) it advances 0.138 m, which this test would catch."""
+    sound speed (351.5 m/s, K_f = 40 M: the physical c_v, 7.5x the steps), where eq 36 takes the flow's
+    sound speed (17.16 m/s) and the density diffusion is 0.1 in its gradient form by default, advances
+    0.183 m from 0.4 s against 0.182 m at the pinned 17.2 m/s (-34 % against S = n; the same with half the
+    time step; the hydrostatic form of the diffusion 0.183 m too).
+    Bound: one particle spacing (the front is one particle's position). With eq 36 at the raised c0 (its
+    shear viscosity 20x; the default before) it advances 0.138 m, which this test would catch."""
     s1, s2, s3 = tmp_path / "d1.h5", tmp_path / "d2.h5", tmp_path / "d3.h5"
     r = run_cli("--config", "configs/embankment.yaml", "--variant", "dry_geostatic", "--set", "dx=0.02",
                 "--out", s1, "--no-progress")
@@ -186,10 +186,9 @@ def test_dry_levee_wetting_front_follows_boussinesq(run_cli, tmp_path):
     # slower than linear: the speed over the second half of the window is below that of the first half
     mid = int(np.argmin(np.abs(t - 2.2)))
     assert (front[-1] - front[mid]) / (t[-1] - t[mid]) < (front[mid] - front[k0]) / (t[mid] - t[k0])
-    # the physical c_v: the same advance to 2.2 s within one particle spacing, and the same bound
-    r = run_cli(*stage2, "--set", "end_time=2.2", "--set", "wcsph.water.sound_speed=null",
-                "--set", "wcsph.artificial_viscosity.speed=17.2", "--set", "wcsph.density_diffusion=0.1",
-                "--set", "wcsph.density_diffusion_form=gradient", "--out", s3)
+    # the physical c_v (the water's default sound speed, and with it the defaults of eq 36's speed and the
+    # density diffusion): the same advance to 2.2 s within one particle spacing, and the same bound
+    r = run_cli(*stage2, "--set", "end_time=2.2", "--set", "wcsph.water.sound_speed=null", "--out", s3)
     assert r.returncode == 0, r.stderr
     t3, front3, ref3 = _dry_front(s3)
     k3, m3 = int(np.argmin(np.abs(t3 - 0.4))), int(np.argmin(np.abs(t3 - 2.2)))

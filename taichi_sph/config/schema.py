@@ -50,6 +50,7 @@ from .run_options import (  # noqa: F401
 )
 from .sweep import Metric, MetricDiagnostic, check_metrics  # noqa: F401
 from .wcsph import (  # noqa: F401
+    DENSITY_DIFFUSION_RAISED,
     PORE_WATER_STIFFNESS,
     WCSPH,
     ArtificialViscosity,
@@ -216,12 +217,30 @@ class WCSPHCase(_Case):
             return self.wcsph.water.sound_speed
         return max(self.wcsph.water.speed_factor * self.expected_speed(), self.pore_water_speed())
 
+    def flow_sound_speed(self) -> float:
+        """The sound speed the flow alone needs (m/s): speed_factor x expected_speed."""
+        return self.wcsph.water.speed_factor * self.expected_speed()
+
     def viscosity_speed(self) -> float:
         """The water's c_ij of the artificial viscosity eq 36 (m/s): `wcsph.artificial_viscosity.speed`, or
-        c0 (`sound_speed`)."""
+        the c0 given (`wcsph.water.sound_speed`), or the flow's sound speed where c0 is left to its default
+        (which soil raises above it: eq 36 at the raised c0 is a shear viscosity 20x the flow's)."""
         if self.wcsph.artificial_viscosity.speed is not None:
             return self.wcsph.artificial_viscosity.speed
-        return self.sound_speed()
+        if self.wcsph.water.sound_speed is not None:
+            return self.sound_speed()
+        return self.flow_sound_speed()
+
+    def raised_sound_speed(self) -> bool:
+        """Soil raised c0 above the flow's sound speed (c0 left to its default)."""
+        return self.wcsph.water.sound_speed is None and self.sound_speed() > self.flow_sound_speed() * (1 + 1e-9)
+
+    def density_diffusion(self) -> float:
+        """delta of the water's density diffusion: `wcsph.density_diffusion`, or 0.1 where soil raised c0
+        (`raised_sound_speed`), else 0."""
+        if self.wcsph.density_diffusion is not None:
+            return self.wcsph.density_diffusion
+        return DENSITY_DIFFUSION_RAISED if self.raised_sound_speed() else 0.0
 
 
 def check_isph_water(cfg: ISPHCase) -> None:

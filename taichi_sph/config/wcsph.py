@@ -20,6 +20,12 @@ from .geometry import Box, Shape, check_box
 #: B = 1 / (1 + M / K_f): 1 / 1.025 = 0.976 at 40 (0.952 at 20 left the undrained ratio at 0.944-0.948,
 #: short of 0.95; docs/biot.md, "Storage and c_v" and "Undrained loading")
 PORE_WATER_STIFFNESS = 40.0
+#: wcsph.density_diffusion when not given, in a scene whose c0 soil raised above the flow's sound speed:
+#: with eq 36 then at the flow's sound speed (artificial_viscosity.speed), the pore water's acoustic modes
+#: need this damping (at dx 0.01 a levee's burst without it); 0.1 is the usual delta-SPH value and, in the
+#: gradient form, leaves the undrained and consolidation checks as without it (docs/biot.md, "Artificial
+#: viscosity and the pore water's sound speed")
+DENSITY_DIFFUSION_RAISED = 0.1
 
 
 class WCSPHWater(Strict):
@@ -66,11 +72,11 @@ class ArtificialViscosity(Strict):
     beta: NonNegFloat = 0.0
     #: eps_AF of eq 36 (seed: 0.1)
     eps: PosFloat = 0.1
-    #: the water's c_ij of eq 36 (m/s); default c0. Its shear viscosity alpha c h / 8 grows with c: where
-    #: soil raises c0 to the pore water's stiffness (~350 m/s at a levee, 20x the flow's) it slowed the
-    #: levee's seepage to 0.73x; the flow's sound speed here (with wcsph.density_diffusion 0.1 in its
-    #: gradient form, without which the pore water burst at dx 0.01) gives the pinned c0's seepage
-    #: (docs/biot.md, "Artificial viscosity and the pore water's sound speed"). Air uses its own c.
+    #: the water's c_ij of eq 36 (m/s); default the c0 given (wcsph.water.sound_speed), or, where c0 is left
+    #: to its default, the flow's sound speed speed_factor x expected_speed. Its shear viscosity alpha c h /
+    #: 8 grows with c: at the c0 that soil raises to the pore water's stiffness (~350 m/s at a levee, 20x the
+    #: flow's) it slowed the levee's seepage to 0.73x (docs/biot.md, "Artificial viscosity and the pore
+    #: water's sound speed"). Air uses its own c.
     speed: PosFloat | None = None
 
 
@@ -267,20 +273,18 @@ class WCSPH(Strict):
     #: density diffusion delta of the water (delta-SPH, Molteni & Colagrossi 2009, with the hydrostatic
     #: part taken out as Fourtakas et al. 2019): d rho_i / dt += delta h c0 sum_j 2 (rho_j - rho_i -
     #: rho^H_ji) (x_j - x_i) . grad_i W_ij / |x_ij|^2 V_j between water particles, rho^H_ji = rho_w g .
-    #: (x_j - x_i) / c0^2; 0 = off. It damps the water's acoustic noise at the rate of c0 without the shear
-    #: viscosity of eq 36. In this (hydrostatic) form it also spreads the pore pressure inside soil at
-    #: delta h c0, a consolidation of its own; density_diffusion_form `gradient` does not (docs/biot.md,
-    #: "Artificial viscosity and the pore water's sound speed": 0.1 in the gradient form with
-    #: artificial_viscosity.speed at the flow's sound speed runs a levee at the physical c_v as with its
-    #: pinned c0)
-    density_diffusion: NonNegFloat = 0.0
+    #: (x_j - x_i) / c0^2 (less the gradient correction of density_diffusion_form); 0 = off. It damps the
+    #: water's acoustic noise at the rate of c0 without the shear viscosity of eq 36. Default 0.1 where soil
+    #: raised c0 above the flow's sound speed (there eq 36 takes the flow's sound speed, and the pore water's
+    #: acoustic modes need it), else 0 (docs/biot.md, "Artificial viscosity and the pore water's sound speed")
+    density_diffusion: NonNegFloat | None = None
     #: the difference the density diffusion acts on: `hydrostatic`, rho_j - rho_i - rho^H_ji (Fourtakas et
     #: al. 2019), a Laplacian: inside soil it consolidates the pore pressure at delta h c0; `gradient`, that
     #: difference less (G_i + G_j) . (x_j - x_i) / 2 with G the renormalised gradient of rho - rho^H from the
     #: last pair pass (Antuono et al. 2010), which vanishes on a linear field: a fourth-order damping that
     #: leaves a smooth pore-pressure field (wavelength L) alone to order (h / L)^2 and still damps the
     #: particle-scale noise (docs/biot.md, "Density diffusion with the gradient correction")
-    density_diffusion_form: Literal["hydrostatic", "gradient"] = "hydrostatic"
+    density_diffusion_form: Literal["hydrostatic", "gradient"] = "gradient"
     #: initial water density: `hydrostatic` (from the weight of the fluid above each particle through the
     #: EOS, the run starts at rest in equilibrium) or `uniform` (fluid.density everywhere, as the seed's
     #: collapse cases). Air always starts at the density of the gas EOS at its depth.

@@ -148,7 +148,7 @@ class WCSPHSolver(SolverCommon):
         self.xsph_on = sw.xsph
         # density diffusion (wcsph.density_diffusion): delta h0 c0, and rho_w / c0^2 for rho^H_ji
         self.dd_on = sw.density_diffusion
-        self.dd_coef = w.density_diffusion * self.h0 * self.c_w
+        self.dd_coef = cfg.density_diffusion() * self.h0 * self.c_w
         self.dd_h = self.rho_w / self.c_w**2
         # its gradient correction: G of the last pair pass, packed into s for the neighbours
         self.dd_grad = sw.density_diffusion_gradient
