@@ -66,7 +66,8 @@ class StabilityGuard:
         self.rho_ref = np.asarray(rho_ref, dtype=float)
         # density ratio of water and air only (soil has its own density and no such bound here)
         self.fluid = np.isin(self.kind, (WATER, AIR))
-        self.soil = self.kind == SOIL
+        # soil particles with a pore pressure (mode wcsph_biot; mode isph's soil markers carry none)
+        self.soil = (self.kind == SOIL) & (cfg.mode == "wcsph_biot")
         self.wall = self.kind == WALL
         self.wall_tol = WALL_TOLERANCE * cfg.dx
         self.wall0 = None

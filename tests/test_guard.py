@@ -85,7 +85,9 @@ def test_pore_pressure_bound_exit_3():
     air and wall particles and removed soil particles are not checked; the largest magnitude seen is kept
     (run attribute pore_pressure_max)."""
     kind = np.array([0, 2, 2, 1, 2, 3])  # water, soil, soil, wall, soil, air
-    g = StabilityGuard(_cfg(), kind, RHO_REF, speed_bound=5.0, pore_pressure_bound=1.0e4)
+    cfg = _cfg()
+    cfg.mode = "wcsph_biot"
+    g = StabilityGuard(cfg, kind, RHO_REF, speed_bound=5.0, pore_pressure_bound=1.0e4)
     g.start(_fields())
     f = _fields()
     f["density"][[1, 2, 4]] = 1000.0  # the soil's density is not checked; keep the fields quiet
@@ -98,11 +100,15 @@ def test_pore_pressure_bound_exit_3():
     exc = _raised(lambda: g.check_fields(4, 0.3, f))
     assert exc.exit_code == 3 and exc.quantity == "pore pressure" and exc.particles == [2, 4]
     assert "pore pressure 2e+04 Pa beyond the bound 1e+04 Pa (guard.max_pore_pressure) at 2 soil" in str(exc)
-    # no bound (no soil, or mode isph): nothing stops, the largest magnitude is still kept
-    g = StabilityGuard(_cfg(), kind, RHO_REF, speed_bound=5.0)
+    # no bound: nothing stops, the largest magnitude is still kept; mode isph's soil markers are not read
+    g = StabilityGuard(cfg, kind, RHO_REF, speed_bound=5.0)
     g.start(_fields())
     g.check_fields(4, 0.3, f)
     assert g.pore_max == 2.0e4
+    g = StabilityGuard(_cfg(), kind, RHO_REF, speed_bound=5.0)
+    g.start(_fields())
+    g.check_fields(4, 0.3, f)
+    assert g.pore_max == 0.0
 
 
 def test_moving_wall_exits_6():
