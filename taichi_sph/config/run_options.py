@@ -149,9 +149,10 @@ class Guard(Strict):
     #: stop when a soil particle's pore pressure exceeds this in magnitude (Pa; mode wcsph_biot with soil);
     #: default 3 x (g H (rho_w + (1 - n) rho_s) + |u0|): the total vertical stress at the floor of a tank of
     #: height H full of saturated soil, plus the largest initial excess pore pressure u0 (the shipped cases
-    #: reach at most 1.8 of that scale: a dry levee's toe as the river is put against it). Where soil raises the water's sound speed, a pressure wave growing
-    #: in the pore water changes its density by less than 1e-3 and its speed stays below 1 m/s: only its
-    #: pressure shows it (docs/biot.md, "The guard's pore-pressure bound")
+    #: reach at most 1.8 of that scale: a dry levee's toe as the river is put against it). Where soil raises
+    #: the water's sound speed, a pressure wave growing in the pore water changes its density by less than
+    #: 1e-3 and its speed stays below 1 m/s: only its pressure shows it (docs/biot.md, "The guard's
+    #: pore-pressure bound")
     max_pore_pressure: Optional[PosFloat] = None
     #: stop when a water or air particle's density falls below this multiple of its reference density
     #: (off by default: free-surface particles of mode isph have a low number density)

@@ -215,7 +215,7 @@ class WCSPHCase(_Case):
         expected_speed and, with soil, `pore_water_speed`."""
         if self.wcsph.water.sound_speed is not None:
             return self.wcsph.water.sound_speed
-        return max(self.wcsph.water.speed_factor * self.expected_speed(), self.pore_water_speed())
+        return max(self.flow_sound_speed(), self.pore_water_speed())
 
     def flow_sound_speed(self) -> float:
         """The sound speed the flow alone needs (m/s): speed_factor x expected_speed."""
@@ -233,7 +233,7 @@ class WCSPHCase(_Case):
 
     def raised_sound_speed(self) -> bool:
         """Soil raised c0 above the flow's sound speed (c0 left to its default)."""
-        return self.wcsph.water.sound_speed is None and self.sound_speed() > self.flow_sound_speed() * (1 + 1e-9)
+        return self.wcsph.water.sound_speed is None and self.pore_water_speed() > self.flow_sound_speed()
 
     def density_diffusion(self) -> float:
         """delta of the water's density diffusion: `wcsph.density_diffusion`, or 0.1 where soil raised c0

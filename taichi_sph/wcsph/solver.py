@@ -922,10 +922,9 @@ class WCSPHSolver(SolverCommon):
         """g H (rho_w + (1 - n) rho_s) + |u0|, H the tank's height: the total vertical stress at the floor of
         a tank full of saturated soil, the most a pore pressure at rest can carry, plus the largest initial
         excess pore pressure u0 (wcsph.soil.initial_excess_pressure)."""
-        sp = self.cfg.wcsph.soil
-        rho = self.rho_w + (1.0 - sp.porosity) * sp.grain_density
-        excess = abs(sp.initial_excess_pressure.amplitude) if sp.initial_excess_pressure is not None else 0.0
-        return rho * self.g_abs * float(self.cfg.tank.size[-1]) + excess
+        u0 = self.cfg.wcsph.soil.initial_excess_pressure
+        excess = abs(u0.amplitude) if u0 is not None else 0.0
+        return (self.rho_w + self.soil.rho_sl) * self.g_abs * float(self.cfg.tank.size[-1]) + excess
 
     def max_pore_pressure_bound(self) -> float | None:
         """Pore-pressure magnitude (Pa) of a soil particle above which the guard stops the run:
