@@ -7,8 +7,9 @@ its height over the first half for that reason alone.
 Usage: python tools/permeameter_reference.py RUN.h5 [RUN.h5 ...]   (runs of configs/permeameter.yaml)
 Prints t, h_sim, h_ode (quasi-steady, inertial) and the relative differences for one run; for several,
 one line each with the largest deviation over the first half of the drainage (h from h0 to h0 / 2)
-from either ODE, the numbers the test and docs/isph.md quote, and the share of the plug's water flagged
-free surface (Dirichlet rows); then the largest spread between the runs' deviations at one time (runs
+from either ODE, the numbers the test and docs/isph.md quote, the share of the plug's water flagged
+free surface (Dirichlet rows), and, from 0.1 s over the first half, the plug core's water per pore volume
+(particles counted, no kernel) and its mean Darcy velocity (the water a plug passes is their product); then the largest spread between the runs' deviations at one time (runs
 of one case at several dt).
 The level is the column's free surface (porosity.column_level), not a count of particles.
 """
@@ -42,22 +43,26 @@ def compare(path, inertia=False):
         h = simulated_level(rf, hi)
         sol = falling_head_level(h[0], hi - lo, reg["eps0"], reg["d50"], t_end=rf.times[-1], inertia=inertia)
         ref = np.array([float(sol(t)) for t in rf.times])
-        share = None
-        if "free_surface" in rf.field_names:
-            share = []
-            core = (lo + 2.4 * rf.dx, hi - 2.4 * rf.dx)  # the plug away from its top and bottom faces
-            for i in range(rf.n_frames):
-                f = rf.frame(i)
-                z = f["position"][:, -1]
-                sel = (rf.kind == 0) & f["active"] & (z > core[0]) & (z < core[1])
+        core = (lo + 2.4 * rf.dx, hi - 2.4 * rf.dx)  # the plug away from its top and bottom faces
+        # the core's pore volume: its height times the tank's cross-section (the plug fills the tank)
+        pores = reg["eps0"] * (core[1] - core[0]) * float(np.prod(cfg["tank"]["size"][:-1]))
+        share, fill, vd = [], [], []
+        for i in range(rf.n_frames):
+            f = rf.frame(i)
+            z = f["position"][:, -1]
+            sel = (rf.kind == 0) & f["active"] & (z > core[0]) & (z < core[1])
+            if "free_surface" in rf.field_names:
                 share.append(float(f["free_surface"][sel].mean()) if sel.any() else float("nan"))
-            share = np.array(share)
-        return rf.times, h, ref, ref >= 0.5 * h[0], share
+            # water counted without a kernel: each particle fills dx^d of pores
+            fill.append(sel.sum() * rf.dx ** rf.dim / pores)
+            vd.append(float(-f["velocity"][sel][:, -1].mean()) if sel.any() else float("nan"))
+        share = np.array(share) if share else None
+        return rf.times, h, ref, ref >= 0.5 * h[0], share, np.array(fill), np.array(vd)
 
 
 def main(paths):
     if len(paths) == 1:
-        t, h, ref, _, _ = compare(paths[0])
+        t, h, ref = compare(paths[0])[:3]
         ref_i = compare(paths[0], inertia=True)[2]
         print("     t   h_sim   h_ode  h_inertial  sim/ode-1  sim/inertial-1")
         for ti, hs, ho, hi in zip(t, h, ref, ref_i):
@@ -65,13 +70,16 @@ def main(paths):
         return
     curves = []
     for p in paths:
-        t, h, ref, half, share = compare(p)
+        t, h, ref, half, share, fill, vd = compare(p)
         ref_i = compare(p, inertia=True)[2]
         dev = h[half] / ref[half] - 1
         dev_i = h[half] / ref_i[half] - 1
         worst = dev[np.argmax(np.abs(dev))]
         worst_i = dev_i[np.argmax(np.abs(dev_i))]
         extra = "" if share is None else f"  plug core free-surface share {np.nanmean(share[half]):.3f}"
+        # past the start from rest, while the column drains through a full plug
+        late = half & (t >= 0.1)
+        extra += f"; core fill {np.nanmean(fill[late]):.3f}, core Darcy velocity {np.nanmean(vd[late]):.4f} m/s"
         print(f"{p}: largest deviation over the first half {worst:+.3%} (quasi-steady ODE), "
               f"{worst_i:+.3%} (with inertia){extra}")
         curves.append((t[half], dev_i))
