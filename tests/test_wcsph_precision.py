@@ -31,9 +31,12 @@ def _floor_pressures(path):
 def test_hydrostatic_tank_f32_matches_f64(run_cli, tmp_path):
     """configs/hydrostatic.yaml in mode wcsph_biot, 0.5 s, at both precisions.
 
-    Measured: floor pressure +0.076 to +0.168 % of rho g H at f32, +0.076 to +0.167 % at f64, the two within
-    0.0010 % of rho g H of each other at every frame from 0.25 s on. Bounds: both within 0.2 % of rho g H
-    (the f64 test's bound), and f32 within 0.002 % of rho g H of f64 at each of those frames."""
+    Measured: floor pressure +0.076 to +0.167 % of rho g H at f64 on both machines below; at f32 +0.076 to
+    +0.168 % on an Intel Xeon (the two within 0.0010 % of rho g H of each other at every frame from 0.25 s
+    on) and +0.069 to +0.161 % on an AMD EPYC with AVX-512 (within 0.0079 %, the f32 run 0.005-0.008 % low
+    at every frame): LLVM compiles the f32 pair pass for the host CPU, whose vector width and fused
+    multiply-adds round it differently. Bounds: both within 0.2 % of rho g H (the f64 test's bound), and
+    f32 within 0.01 % of rho g H of f64 at each of those frames, above the larger of the two."""
     runs = {}
     for prec in ("f32", "f64"):
         out = tmp_path / f"h_{prec}.h5"
@@ -56,7 +59,7 @@ def test_hydrostatic_tank_f32_matches_f64(run_cli, tmp_path):
         runs[prec] = _floor_pressures(out)
     for prec, p in runs.items():
         assert np.all(np.abs(p - 1) < 0.002), (prec, p)
-    assert np.all(np.abs(runs["f32"] - runs["f64"]) < 2e-5), runs
+    assert np.all(np.abs(runs["f32"] - runs["f64"]) < 1e-4), runs
 
 
 def test_dambreak_front_f32_matches_f64(run_cli, tmp_path):
