@@ -8,9 +8,10 @@ Usage: python tools/permeameter_reference.py RUN.h5 [RUN.h5 ...]   (runs of conf
 Prints t, h_sim, h_ode (quasi-steady, inertial) and the relative differences for one run; for several,
 one line each with the largest deviation over the first half of the drainage (h from h0 to h0 / 2)
 from either ODE, the numbers the test and docs/isph.md quote, the share of the plug's water flagged
-free surface (Dirichlet rows), and, from 0.1 s over the first half, the plug core's water per pore volume
-(particles counted, no kernel) and its mean Darcy velocity (the water a plug passes is their product); then the largest spread between the runs' deviations at one time (runs
-of one case at several dt).
+free surface (Dirichlet rows), and, from 0.1 s over the first half, the plug core's water per pore
+volume (particles counted, no kernel) and its mean Darcy velocity (the water a plug passes is their
+product); then the largest spread between the runs' deviations at one time (runs of one case at
+several dt).
 The level is the column's free surface (porosity.column_level), not a count of particles.
 """
 
@@ -76,10 +77,11 @@ def main(paths):
         dev_i = h[half] / ref_i[half] - 1
         worst = dev[np.argmax(np.abs(dev))]
         worst_i = dev_i[np.argmax(np.abs(dev_i))]
-        extra = "" if share is None else f"  plug core free-surface share {np.nanmean(share[half]):.3f}"
-        # past the start from rest, while the column drains through a full plug
+        # fill and velocity past the start from rest, while the column drains through a full plug
         late = half & (t >= 0.1)
-        extra += f"; core fill {np.nanmean(fill[late]):.3f}, core Darcy velocity {np.nanmean(vd[late]):.4f} m/s"
+        extra = f"  plug core fill {np.nanmean(fill[late]):.3f}, Darcy velocity {np.nanmean(vd[late]):.4f} m/s"
+        if share is not None:
+            extra += f", free-surface share {np.nanmean(share[half]):.3f}"
         print(f"{p}: largest deviation over the first half {worst:+.3%} (quasi-steady ODE), "
               f"{worst_i:+.3%} (with inertia){extra}")
         curves.append((t[half], dev_i))
