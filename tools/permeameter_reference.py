@@ -34,16 +34,20 @@ def simulated_level(rf, plug_top):
     return np.array(out)
 
 
-def compare(path, inertia=False):
-    """(t, h_sim, h_ode, first-half mask, plug's free-surface share per frame or None) of one run, against
-    the quasi-steady ODE or (inertia=True) the one with the column's and the plug's inertia."""
+def compare(path):
+    """Per frame of one run: t, h_sim, h against the quasi-steady ODE and against the one with the column's
+    and the plug's inertia, the first-half mask (quasi-steady h >= h0 / 2), and the plug core's
+    free-surface share (None without that field), water per pore volume and mean Darcy velocity."""
     with RunFile(path) as rf:
         cfg = yaml.safe_load(rf.config_yaml)
         reg = cfg["soil"]["regions"][0]
         lo, hi = reg["min"][-1], reg["max"][-1]
         h = simulated_level(rf, hi)
-        sol = falling_head_level(h[0], hi - lo, reg["eps0"], reg["d50"], t_end=rf.times[-1], inertia=inertia)
-        ref = np.array([float(sol(t)) for t in rf.times])
+        ref, ref_i = (
+            np.array([float(sol(t)) for t in rf.times])
+            for sol in (falling_head_level(h[0], hi - lo, reg["eps0"], reg["d50"], t_end=rf.times[-1], inertia=k)
+                        for k in (False, True))
+        )
         core = (lo + 2.4 * rf.dx, hi - 2.4 * rf.dx)  # the plug away from its top and bottom faces
         # the core's pore volume: its height times the tank's cross-section (the plug fills the tank)
         pores = reg["eps0"] * (core[1] - core[0]) * float(np.prod(cfg["tank"]["size"][:-1]))
@@ -58,21 +62,19 @@ def compare(path, inertia=False):
             fill.append(sel.sum() * rf.dx ** rf.dim / pores)
             vd.append(float(-f["velocity"][sel][:, -1].mean()) if sel.any() else float("nan"))
         share = np.array(share) if share else None
-        return rf.times, h, ref, ref >= 0.5 * h[0], share, np.array(fill), np.array(vd)
+        return rf.times, h, ref, ref_i, ref >= 0.5 * h[0], share, np.array(fill), np.array(vd)
 
 
 def main(paths):
     if len(paths) == 1:
-        t, h, ref = compare(paths[0])[:3]
-        ref_i = compare(paths[0], inertia=True)[2]
+        t, h, ref, ref_i = compare(paths[0])[:4]
         print("     t   h_sim   h_ode  h_inertial  sim/ode-1  sim/inertial-1")
         for ti, hs, ho, hi in zip(t, h, ref, ref_i):
             print(f"{ti:6.3f}  {hs:.4f}  {ho:.4f}  {hi:.4f}      {hs / ho - 1:+.3f}      {hs / hi - 1:+.3f}")
         return
     curves = []
     for p in paths:
-        t, h, ref, half, share, fill, vd = compare(p)
-        ref_i = compare(p, inertia=True)[2]
+        t, h, ref, ref_i, half, share, fill, vd = compare(p)
         dev = h[half] / ref[half] - 1
         dev_i = h[half] / ref_i[half] - 1
         worst = dev[np.argmax(np.abs(dev))]
