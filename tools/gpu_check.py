@@ -7,9 +7,11 @@ with `--arch cuda` (tools/config_matrix.py); the PPE iteration's bandwidth, both
 (its process group killed) and the next one starts; each writes its log and report into OUT.
 
     python tools/gpu_check.py --out DIR [--only tests parity configs bandwidth freefall bench bench3d]
-        [--scale 1.0] [--arch cpu]
+        [--budget freefall=90 ...] [--scale 1.0] [--arch cpu]
 
-`--scale` multiplies every budget. `--arch cpu` runs the same sequence on the CPU (a dry run of the
+`--only` runs those checks in the order given (after `start`), so that the ones that matter most come
+first when device time is short. `--budget NAME=SECONDS` sets one check's budget; `--scale` multiplies
+every budget. `--arch cpu` runs the same sequence on the CPU (a dry run of the
 tool itself: the `cuda` tests skip, parity compares the CPU with itself). Prints one line per check (exit status, seconds) and writes
 DIR/summary.txt. Exits 1 when a check fails or overruns.
 """
@@ -32,7 +34,7 @@ CHECKS = {
                               "assert ti.lang.impl.current_cfg().arch == ti.cuda; print('cuda ok')")]),
     "tests": (240, [PY, "-m", "pytest", "-q", "-m", "cuda", "tests/test_cuda.py", "-p", "no:cacheprovider"]),
     "parity": (240, [PY, "tools/parity.py", "--against", "cuda", "--out-dir", "OUT/parity", "--json", "OUT/parity.json"]),
-    "configs": (420, [PY, "tools/config_matrix.py", "--arch", "cuda", "--timeout", "120", "--out-dir", "OUT/configs",
+    "configs": (420, [PY, "tools/config_matrix.py", "--arch", "cuda", "--timeout", "120", "--jobs", "4", "--out-dir", "OUT/configs",
                       "--json", "OUT/configs.json", "--report", "OUT/performance.md"]),
     "bandwidth": (120, [PY, "tools/bench_ppe_bandwidth.py", "--arch", "cuda", "--sizes", "2d1m", "2d4m", "3d1m", "--iterations", "100",
                         "--reductions", "atomic", "two_stage", "--json", "OUT/bandwidth.json"]),
@@ -70,10 +72,21 @@ def run_check(name: str, budget: float, cmd: list, out: Path, arch: str = "cuda"
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
-    ap.add_argument("--only", nargs="+", choices=list(CHECKS))
+    ap.add_argument("--only", nargs="+", choices=list(CHECKS), help="these checks, in this order ('start' first)")
     ap.add_argument("--scale", type=float, default=1.0, help="multiplies every budget")
+    ap.add_argument("--budget", nargs="+", default=[], metavar="NAME=SECONDS",
+                    help="a check's own budget in seconds (before --scale), e.g. freefall=90")
     ap.add_argument("--arch", default="cuda", choices=["cuda", "cpu"], help="cpu: a dry run of the tool")
     args = ap.parse_args(argv)
+    budgets = {name: budget for name, (budget, _) in CHECKS.items()}
+    for item in args.budget:
+        name, _, seconds = item.partition("=")
+        if name not in CHECKS:
+            ap.error(f"--budget {item}: no check named {name!r}")
+        try:
+            budgets[name] = float(seconds)
+        except ValueError:
+            ap.error(f"--budget {item}: seconds must be a number")
     args.out.mkdir(parents=True, exist_ok=True)
     perf = args.out / "performance.md"
     if not perf.exists():  # the bench and config tables merge into a copy of the project's report
@@ -82,9 +95,10 @@ def main(argv=None) -> int:
             if src.exists():
                 shutil.copy(src, args.out / f"performance{suffix}")
     lines, failed = [], 0
-    for name, (budget, cmd) in CHECKS.items():
-        if args.only and name not in args.only and name != "start":
-            continue
+    # the order of --only, so that the checks that matter most run first when device time is short
+    names = ["start"] + [n for n in args.only if n != "start"] if args.only else list(CHECKS)
+    for name in names:
+        budget, cmd = budgets[name], CHECKS[name][1]
         rc, seconds = run_check(name, budget * args.scale, cmd, args.out, args.arch)
         line = f"{name:10s} exit {rc:3d}  {seconds:6.1f} s  (budget {budget * args.scale:.0f} s)"
         print(line, flush=True)
