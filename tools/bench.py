@@ -57,7 +57,7 @@ def gpu_memory_used_mb() -> float | None:
     """The first GPU's used memory (MB) from nvidia-smi, or None without one."""
     try:
         out = subprocess.run(["nvidia-smi", "--query-gpu=memory.used", "--format=csv,noheader,nounits"],
-                             capture_output=True, text=True, timeout=30).stdout.split()
+                             capture_output=True, text=True, timeout=30, check=False).stdout.split()
         return float(out[0]) if out else None
     except (OSError, subprocess.SubprocessError, ValueError):
         return None
@@ -67,7 +67,7 @@ def gpu_name() -> str | None:
     """The first GPU's name, memory and driver from nvidia-smi, or None without one."""
     try:
         out = subprocess.run(["nvidia-smi", "--query-gpu=name,memory.total,driver_version", "--format=csv,noheader"],
-                             capture_output=True, text=True, timeout=30).stdout.strip()
+                             capture_output=True, text=True, timeout=30, check=False).stdout.strip()
         return out.splitlines()[0] if out else None
     except (OSError, subprocess.SubprocessError):
         return None
@@ -172,6 +172,11 @@ def run_case(spec: dict) -> dict:
         step()
     for k in solver.timers:
         solver.timers[k] = 0.0
+    if spec.get("kernel_profile"):
+        import taichi as ti
+
+        ti.sync()
+        ti.profiler.clear_kernel_profiler_info()
     iters = []
     steps = 0
     t0 = time.perf_counter()
@@ -184,6 +189,7 @@ def run_case(spec: dict) -> dict:
             break
     wall = time.perf_counter() - t0
     cpu = time.process_time() - cpu0
+    profile = kernel_profile(steps, spec["kernel_profile"]) if spec.get("kernel_profile") else None
     n_water = solver.n_water or solver.n_fluid
     per_step = wall / steps
     return {
@@ -197,11 +203,33 @@ def run_case(spec: dict) -> dict:
         "jit_seconds": max(first - per_step, 0.0),
         "peak_memory_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         "device_memory_mb": (gpu_memory_used_mb() - gpu_before) if gpu_before is not None else None,
+        **({"kernel_profile": profile} if profile is not None else {}),
     }
+
+
+def kernel_profile(steps: int, top: int) -> list:
+    """The `top` offloaded tasks (a kernel's parallel loops, each launched on its own) that took the most
+    device time over the timed steps, from Taichi's kernel profiler (on while TI_KERNEL_PROFILER=1; on
+    CUDA it times each task with events, so the steps themselves run somewhat slower): per task its
+    milliseconds and launches per step, and its share of all the tasks' time."""
+    import taichi as ti
+    from taichi.profiler.kernel_profiler import get_default_kernel_profiler
+
+    ti.sync()
+    prof = get_default_kernel_profiler()
+    prof._update_records()  # Taichi 1.7 keeps the per-task table private
+    prof._count_statistics()
+    stats = prof._statistical_results
+    total = sum(v.total_time for v in stats.values()) or 1.0
+    rows = sorted(stats.items(), key=lambda kv: -kv[1].total_time)[:top]
+    return [{"task": name, "ms_per_step": v.total_time / steps, "launches_per_step": v.counter / steps,
+             "share": v.total_time / total} for name, v in rows]
 
 
 def spawn(spec: dict, cache: Path) -> dict:
     env = dict(os.environ, TAICHI_SPH_CACHE=str(cache), TI_LOG_LEVEL="error")
+    if spec.get("kernel_profile"):
+        env["TI_KERNEL_PROFILER"] = "1"
     with tempfile.NamedTemporaryFile(suffix=".json") as f:
         cmd = [sys.executable, __file__, "--child", json.dumps(spec), "--child-out", f.name]
         r = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
@@ -293,6 +321,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "docs" / "performance.md"))
     ap.add_argument("--keep", action="store_true", help="keep the cases already in the report that this run "
                     "does not repeat (add sizes or modes to an earlier run)")
+    ap.add_argument("--kernel-profile", type=int, default=0, metavar="N",
+                    help="print each case's N offloaded tasks that took the most device time per step (Taichi's "
+                         "kernel profiler; it slows the steps, so the throughput of such a run is not the "
+                         "benchmark's)")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--child-out", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -311,7 +343,7 @@ def main(argv=None) -> int:
             for dim in args.dims:
                 for size in sizes:
                     spec = {"mode": mode, "dim": dim, "size": size, "arch": arch, "target": SIZES[size],
-                            "min_time": args.min_time, "set": overrides}
+                            "min_time": args.min_time, "set": overrides, "kernel_profile": args.kernel_profile}
                     if MODES[mode] is None:
                         results.append({**spec, "error": "mode not implemented yet"})
                         continue
@@ -321,7 +353,7 @@ def main(argv=None) -> int:
                         jit = None
                         if size == sizes[0] and not args.no_jit:
                             # one step with an empty offline cache (cold JIT), then again with it filled (warm)
-                            one = {**pspec, "min_time": 0.0, "max_steps": 1, "warmup": 0}
+                            one = {**pspec, "min_time": 0.0, "max_steps": 1, "warmup": 0, "kernel_profile": 0}
                             with tempfile.TemporaryDirectory() as tmp:
                                 jit = [spawn(one, Path(tmp)) for _ in range(2)]
                         r = spawn(pspec, cache)
@@ -332,6 +364,9 @@ def main(argv=None) -> int:
                         msg = r.get("error") or (f"{r['water_particles']} particles, {r['mipps']:.3f} M particle-steps/s, "
                                                  f"{1e3 * r['seconds_per_step']:.1f} ms/step")
                         print(f"{mode} {ppe or ''} {dim}D {size} {arch}: {msg}", flush=True)
+                        for row in r.get("kernel_profile", []):
+                            print(f"    {row['ms_per_step']:9.3f} ms/step {row['launches_per_step']:6.2f} launches/step "
+                                  f"{100 * row['share']:5.1f} %  {row['task']}", flush=True)
     import taichi as ti
 
     info = {"machine": machine(), "gpu": gpu_name() if "cuda" in args.arch else None, "taichi": ".".join(map(str, ti.__version__)),

@@ -3,7 +3,8 @@
 In order: Taichi starts on CUDA; the tests marked `cuda`; CPU/CUDA parity (tools/parity.py); every config
 with `--arch cuda` (tools/config_matrix.py); the PPE iteration's bandwidth, both reductions in f64
 (tools/bench_ppe_bandwidth.py); the seed's free fall timed alone; the step benchmark on CUDA
-(tools/bench.py, merged into a copy of docs/performance.md). A check that overruns its budget is stopped
+(tools/bench.py, merged into a copy of docs/performance.md); the offloaded tasks that take a step's
+device time (`profile`: tools/bench.py --kernel-profile). A check that overruns its budget is stopped
 (its process group killed) and the next one starts; each writes its log and report into OUT.
 
     python tools/gpu_check.py --out DIR [--only tests parity configs bandwidth freefall bench bench3d]
@@ -43,6 +44,10 @@ CHECKS = {
     # tools/bench.py writes its table when all its cases are done: two calls, so that an overrun loses one
     "bench": (240, [PY, "tools/bench.py", "--arch", "cuda", "--modes", "wcsph", "isph_free", "--dims", "2",
                     "--sizes", "S", "L", "XL", "--min-time", "2", "--no-jit", "--out", "OUT/performance.md", "--keep"]),
+    # where a step's device time goes: the offloaded tasks that take most of it (Taichi's kernel profiler)
+    "profile": (150, [PY, "tools/bench.py", "--arch", "cuda", "--modes", "wcsph", "isph_free", "--dims", "2",
+                      "--sizes", "S", "L", "--min-time", "1", "--no-jit", "--kernel-profile", "12",
+                      "--out", "OUT/profile.md"]),
     "bench3d": (180, [PY, "tools/bench.py", "--arch", "cuda", "--modes", "isph_porous", "wcsph", "--dims", "3",
                       "--sizes", "S", "L", "--min-time", "2", "--no-jit", "--out", "OUT/performance.md", "--keep"]),
 }
