@@ -268,7 +268,7 @@ def test_f32_reports_its_true_residual(lattice):
 
 @pytest.mark.parametrize("case", ["lattice", "spd"])
 def test_two_stage_reduction_gives_the_atomic_iterates(case, request):
-    """The two-stage dot products (the CUDA f64 choice, forced here on the CPU) are the same CG: the same
+    """The two-stage dot products (the CUDA choice, forced here on the CPU) are the same CG: the same
     solution to the tolerance and the same iteration count within the round-off that moves the crossing
     of the tolerance (the sums are taken in another order), as against scipy above."""
     A, b, x_exact, cond = request.getfixturevalue(case)

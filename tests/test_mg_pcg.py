@@ -59,7 +59,7 @@ def test_vcycle_is_symmetric_positive_definite(ti_cpu, shape):
 @pytest.mark.parametrize("reduction", ["atomic", "two_stage"])
 @pytest.mark.parametrize("shape", [(30, 30), (12, 12, 12)])
 def test_solution_matches_scipy(ti_cpu, shape, reduction):
-    """Both ways of summing CG's dot products (two_stage is the CUDA f64 choice, forced here)."""
+    """Both ways of summing CG's dot products (two_stage is the CUDA choice, forced here)."""
     mg, A, b = lattice_solver(shape, reduction=reduction)
     x_exact = spl.spsolve(A.tocsc(), b)
     cond = np.linalg.cond(A.toarray())

@@ -65,7 +65,7 @@ import taichi as ti
 
 from ..backend import on_cpu
 from ..sph.scan import PrefixSum
-from .ell_pcg import EllPCG
+from .ell_pcg import STAGE_THREADS, EllPCG
 
 #: factor on the coarse-grid correction of every level (see the module docstring)
 OVERCORRECTION = 2.0
@@ -435,10 +435,23 @@ class MGPCG(EllPCG):
                     yj += alpha * self.gt[cj]
                 s += self.vals[i, k] * yj
             self.t0[i] = yi + self.inv_diag[i] * (self.r[i] - s)
-        for i in range(n):
-            zi = self.t0[i] + self.inv_diag[i] * (self.r[i] - self.row_times(i, self.t0))
-            self.z[i] = zi
-            self.rz_new[None] += self.r[i] * zi
+        if ti.static(self.reduction == "two_stage"):  # r.z in two stages, without atomics (ell_pcg.py)
+            zero = ti.cast(0, self.dtype)
+            for t in range(STAGE_THREADS):
+                acc = zero
+                i = t
+                while i < n:
+                    zi = self.t0[i] + self.inv_diag[i] * (self.r[i] - self.row_times(i, self.t0))
+                    self.z[i] = zi
+                    acc += self.r[i] * zi
+                    i += STAGE_THREADS
+                self.stage[t] = ti.Vector([acc, zero, zero])
+            self.rz_new[None] = self._folded()[0]
+        else:
+            for i in range(n):
+                zi = self.t0[i] + self.inv_diag[i] * (self.r[i] - self.row_times(i, self.t0))
+                self.z[i] = zi
+                self.rz_new[None] += self.r[i] * zi
         rz = self.rz[None]
         new = self.rz_new[None]
         beta = ti.cast(0, self.dtype)
