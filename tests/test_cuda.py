@@ -123,7 +123,7 @@ def test_consolidation_on_cuda(tmp_path):
 
 @pytest.mark.parametrize("precision", ["f64", "f32"])
 def test_ell_pcg_on_cuda_matches_a_direct_solve(precision):
-    """EllPCG (the PPE's CG, column layout on CUDA) on the 2D 5-point Poisson matrix of 10,000 rows against
+    """EllPCG (the PPE's CG, column layout and batched iterations on CUDA) on the 2D 5-point Poisson matrix of 10,000 rows against
     scipy's direct solve, the solver asked for a relative residual of 1e-8 (f64) and 1e-5 (f32, above
     where its rounding stalls it). The same solve on the CPU leaves errors of 1.2e-8 and 1.9e-5 against
     the direct solve; the bounds, 1e-7 and 1e-4, hold those with the room of a differently ordered sum."""
@@ -155,8 +155,8 @@ print(it, res, ok, np.linalg.norm(x - ref) / np.linalg.norm(ref))
 
 def test_gpu_paths_are_chosen_on_cuda():
     """On CUDA the GPU forms are the ones compiled (docs/performance.md, "GPU"): no scene runs its loops
-    serially, the prefix sums are blocked, and the PPE's f64 dot products are summed in two stages; and a
-    short step of each mode runs with them."""
+    serially, the prefix sums are blocked, the PPE's dot products are summed in two stages and its
+    Jacobi-PCG iterations launched in batches; and a short step of each mode runs with them."""
     code = """
 import taichi as ti
 ti.init(arch=ti.cuda, default_fp=ti.f32, log_level=ti.ERROR)
@@ -175,6 +175,9 @@ cfg = load_config(data=dict(base, mode="isph", dt=0.002, isph={"ppe": {"type": "
 s = make_solver(cfg, build_scene(cfg))
 assert s.grid._scan.blocked and s._row_scan.blocked and s.ppe._cell_scan.blocked
 assert s.ppe.reduction == "two_stage" and s.ppe.n_par == s.ppe.m - 1
+from taichi_sph.linalg.ell_pcg import BATCH_GPU, EllPCG
+e = EllPCG(10, 4)
+assert e.batch == BATCH_GPU and e.reduction == "two_stage" and e.layout == "column"
 s.initial_diagnostics()
 s.step(0.002)
 print("gpu paths ok")

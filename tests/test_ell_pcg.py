@@ -289,3 +289,37 @@ def test_reduction_choice(ti_cpu):
     assert EllPCG(10, 4).reduction == "atomic"
     with pytest.raises(ValueError, match="reduction"):
         EllPCG(10, 4, reduction="tree")
+
+
+@pytest.mark.parametrize("reduction", ["atomic", "two_stage"])
+@pytest.mark.parametrize("case", ["lattice", "spd"])
+def test_batched_iterations_give_the_same_solve(case, reduction, request):
+    """Batches of iterations launched without reading anything back (`batch` > 1, the CUDA choice; forced
+    here on the CPU), the convergence state kept on the device, give the solve of one launch and one
+    read per iteration bit for bit: the same iterates, the same count and the same residual. Also when
+    the iteration limit stops CG first (a limit that is not a multiple of the batch), and from a warm
+    start that needs no iteration at all."""
+    A, b, x_exact, cond = request.getfixturevalue(case)
+    n = A.shape[0]
+    for limit in (5000, 19):
+        runs = {}
+        for batch in (1, 8):
+            solver = EllPCG(n, max_offdiag(A), TOL, limit, reduction=reduction, batch=batch)
+            solver.load_csr(A.indptr, A.indices, A.data, b, np.zeros(n))
+            it, res, ok = solver.solve()
+            runs[batch] = (it, res, ok, solver.x.to_numpy()[:n])
+            if limit == 5000:
+                check_solution(A, b, x_exact, cond, runs[batch][3], it, res, ok)
+                again = solver.solve()  # warm: converged already, no iteration
+                assert again[0] == 0 and again[2]
+            else:
+                assert it == limit and not ok
+        assert runs[1][:3] == runs[8][:3], (runs[1][:3], runs[8][:3])
+        assert np.array_equal(runs[1][3], runs[8][3])
+
+
+def test_batch_choice(ti_cpu):
+    """auto is one iteration per read on the CPU (launches are synchronous there); a bad batch is refused."""
+    assert EllPCG(10, 4).batch == 1
+    with pytest.raises(ValueError, match="batch"):
+        EllPCG(10, 4, batch=0)

@@ -20,10 +20,14 @@ each iteration streams the matrix once and a handful of vectors. This tool measu
   and bytes / time is the bandwidth it achieves. Reported against the copy kernel's.
 
 Both ELL layouts ("row": a row's slots together; "column": slot k of consecutive rows together) and f32
-and f64 are run, each with the solver's reduction for that precision (`reduction="auto"`: two-stage
-dot products for f64 on CUDA), or with those named by `--reductions`.
+and f64 are run, each with the solver's reduction (`reduction="auto"`: two-stage
+dot products on CUDA), or with those named by `--reductions`.
 
-    python tools/bench_ppe_bandwidth.py [--arch cuda] [--sizes 2d1m 2d4m 3d1m] [--iterations 200]
+Each case is timed twice: one launch per iteration with |r|^2 read back after each (the solver's way
+with `batch` 1), and in batches of `--batch` launches with the convergence state read once per batch
+(EllPCG's `batch`, its CUDA default), where the host queues the launches without waiting on each.
+
+    python tools/bench_ppe_bandwidth.py [--arch cuda] [--sizes 2d1m 2d4m 3d1m] [--iterations 200] [--batch 8]
         [--reductions auto atomic two_stage]
 """
 
@@ -94,7 +98,8 @@ def lattice_offsets(dim: int):
     return offs, [float(c) for c in coef]
 
 
-def bench_size(ti, name: str, shape, dtype, layout: str, iterations: int, reduction: str = "auto") -> dict:
+def bench_size(ti, name: str, shape, dtype, layout: str, iterations: int, reduction: str = "auto",
+               batch: int = 8) -> dict:
     from taichi_sph.linalg.ell_pcg import EllPCG
 
     dim = len(shape)
@@ -153,10 +158,31 @@ def bench_size(ti, name: str, shape, dtype, layout: str, iterations: int, reduct
         ell._iterate()
     ti.sync()
     per_iter = (time.perf_counter() - t0) / iterations
+    # the same iterations in batches of `batch` launches, the convergence state read once per batch
+    # (EllPCG's `batch`, the CUDA default): the launches queue without the host waiting on each
+    ell._restart()
+    ell._k_gate_open()
+    for _ in range(2):  # warm-up (compiles)
+        ell._k_iterate_gated(True, 0.0, 1 << 30)
+    ell._k_gate()
+    ell._restart()
+    ell._k_gate_open()
+    ti.sync()
+    t0 = time.perf_counter()
+    done = 0
+    while done < iterations:
+        k = min(batch, iterations - done)
+        for _ in range(k):
+            ell._k_iterate_gated(True, 0.0, 1 << 30)  # threshold 0: runs on, as the loop above
+        ell._k_gate()
+        done += k
+    ti.sync()
+    per_iter_batched = (time.perf_counter() - t0) / iterations
     f = 8 if dtype == ti.f64 else 4
     nbytes = 3 * n * f + n * (4 + 3 * f) + nnz * (4 + f) + 8 * n * f
     return {"case": name, "rows": n, "dim": dim, "precision": "f64" if dtype == ti.f64 else "f32", "layout": layout,
-            "reduction": ell.reduction, "nnz_per_row": nnz / n, "ms_per_iteration": 1e3 * per_iter, "bytes_per_iteration": nbytes,
+            "reduction": ell.reduction, "nnz_per_row": nnz / n, "ms_per_iteration": 1e3 * per_iter,
+            "batch": batch, "ms_per_iteration_batched": 1e3 * per_iter_batched, "bytes_per_iteration": nbytes,
             "gb_per_s": nbytes / per_iter / 1e9, "fill_s_first": fill_s}
 
 
@@ -168,6 +194,8 @@ def main(argv=None) -> int:
     ap.add_argument("--layouts", nargs="+", default=["column", "row"], choices=["column", "row"])
     ap.add_argument("--reductions", nargs="+", default=["auto"], choices=["auto", "atomic", "two_stage"])
     ap.add_argument("--iterations", type=int, default=200)
+    ap.add_argument("--batch", type=int, default=8, help="launches per read of the convergence state in the "
+                    "batched timing (EllPCG's batch)")
     ap.add_argument("--copy-mb", type=float, default=1024.0, help="MB per array of the copy kernel")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
@@ -182,17 +210,18 @@ def main(argv=None) -> int:
             for layout in args.layouts:
                 for reduction in args.reductions:
                     r = bench_size(ti, name, SIZES[name], ti.f64 if prec == "f64" else ti.f32, layout,
-                                   args.iterations, reduction)
+                                   args.iterations, reduction, args.batch)
                     r["fraction_of_copy"] = r["gb_per_s"] * 1e9 / copy[prec]
                     rows.append(r)
                     print(json.dumps(r), flush=True)
     lines = [f"Arch {args.arch}; copy kernel: " + ", ".join(f"{p} {v / 1e9:.0f} GB/s" for p, v in copy.items()), "",
-             ("| lattice | rows | entries/row | precision | layout | reduction | ms / iteration | MB / iteration "
-              "| GB/s | of copy |"),
-             "|---|---:|---:|---|---|---|---:|---:|---:|---:|"]
+             ("| lattice | rows | entries/row | precision | layout | reduction | ms / iteration | ms / iteration, "
+              f"batches of {args.batch} | MB / iteration | GB/s | of copy |"),
+             "|---|---:|---:|---|---|---|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['case']} | {r['rows']} | {r['nnz_per_row'] + 1:.1f} | {r['precision']} | {r['layout']} | "
-                     f"{r['reduction']} | {r['ms_per_iteration']:.3f} | {r['bytes_per_iteration'] / 1e6:.0f} | {r['gb_per_s']:.0f} | "
+                     f"{r['reduction']} | {r['ms_per_iteration']:.3f} | {r['ms_per_iteration_batched']:.3f} | "
+                     f"{r['bytes_per_iteration'] / 1e6:.0f} | {r['gb_per_s']:.0f} | "
                      f"{100 * r['fraction_of_copy']:.0f} % |")
     print("\n".join(lines))
     if args.json:

@@ -45,7 +45,13 @@ measures both.
 Solver: preconditioned CG (Hestenes-Stiefel) with M = diag(A), starting from the x already in the
 field. Each iteration is one kernel launch (p update, matvec with the p.Ap reduction, x/r/z update
 with the r.r and r.z reductions) that returns one scalar, |r|^2, to the host; no vector leaves the
-device. When the recurrence says |r| / |b| <= tolerance, the true residual b - A x is computed; if it
+device. On CUDA (`batch="auto"`: BATCH_GPU) Jacobi-PCG launches its iterations in batches without reading
+anything back, and reads a gate kept on the device once per batch: an iteration runs only while the gate
+is open and closes it where the host loop would have stopped (breakdown, non-finite, converged, the
+iteration limit), so a batch gives the same iterates, count and residual as one read per iteration
+(tests/test_ell_pcg.py, bit for bit on the CPU) without the host waiting on every launch. Measured on an
+H100 with one read per iteration: 0.27-0.34 ms an iteration at 10k to 1M rows, of which the bytes need
+0.1-0.15 ms at 1M (docs/performance.md, "GPU"); the batches are not yet timed there. When the recurrence says |r| / |b| <= tolerance, the true residual b - A x is computed; if it
 is above the tolerance (round-off drift, f32), CG restarts from the true residual, at most
 MAX_RESTARTS times, within `max_iterations` iterations in all. A zero right-hand side gives x = 0.
 A matrix whose null space is the constants (a PPE without any Dirichlet row: a closed or periodic box
@@ -76,6 +82,8 @@ import taichi as ti
 
 #: true-residual restarts allowed after the recurrence residual has met the tolerance
 MAX_RESTARTS = 3
+#: Jacobi-PCG iterations launched per read of the convergence state on CUDA (`batch="auto"`)
+BATCH_GPU = 8
 #: two-stage dot products: threads of the first stage (each sums every STAGE_THREADS-th row), and of the fold
 STAGE_THREADS = 1 << 16
 FOLD_THREADS = 256
@@ -105,8 +113,12 @@ class EllPCG:
 
     layout: "row" stores the slots of one row contiguously (a CPU thread per row reads them in one
     stream; measured fastest on CPU), "column" stores slot k of consecutive rows contiguously (the
-    usual GPU ELL layout, for coalesced loads; not measured here on a GPU); "auto" picks "column" on
-    CUDA and "row" elsewhere.
+    usual GPU ELL layout, for coalesced loads; on an H100 the faster in f64 and about even in f32,
+    docs/performance.md "GPU"); "auto" picks "column" on CUDA and "row" elsewhere.
+
+    batch: Jacobi-PCG iterations launched per read of the convergence state (module docstring); "auto":
+    BATCH_GPU on CUDA, 1 elsewhere (the CPU's launches are synchronous: nothing to gain). A subclass with its
+    own preconditioner (mg_pcg.py) iterates one launch per read.
 
     reduction: how an iteration's dot products are summed: "atomic" (Taichi's own reduction), "two_stage"
     (partial sums in slots, folded without atomics; see the module's docstring), or "auto": "two_stage"
@@ -116,7 +128,7 @@ class EllPCG:
     name = "ell_pcg"
 
     def __init__(self, n_max: int, max_nb: int, tolerance: float = 1.0e-8, max_iterations: int = 2000,
-                 dtype=None, layout: str = "auto", reduction: str = "auto"):
+                 dtype=None, layout: str = "auto", reduction: str = "auto", batch: int | str = "auto"):
         if n_max < 1 or max_nb < 1:
             raise ValueError(f"EllPCG needs n_max >= 1 and max_nb >= 1, not {n_max} and {max_nb}")
         self.n_max = int(n_max)
@@ -138,6 +150,13 @@ class EllPCG:
         if reduction not in ("atomic", "two_stage"):
             raise ValueError(f"reduction must be 'atomic', 'two_stage' or 'auto', not {reduction!r}")
         self.reduction = reduction
+        if batch == "auto":
+            from taichi.lang import impl
+
+            batch = BATCH_GPU if impl.current_cfg().arch == ti.cuda else 1
+        if not isinstance(batch, int) or batch < 1:
+            raise ValueError(f"batch must be a positive integer or 'auto', not {batch!r}")
+        self.batch = batch
         if reduction == "two_stage":
             self.stage = ti.Vector.field(3, fp, STAGE_THREADS)
             self.fold = ti.Vector.field(3, fp, FOLD_THREADS)
@@ -168,6 +187,8 @@ class EllPCG:
         self.alpha = ti.field(fp, ())
         self.beta = ti.field(fp, ())
         self.breakdown = ti.field(ti.i32, ())
+        # batched iterations (`batch` > 1): stopped, iterations made and the last |r|^2, kept on the device
+        self.gate = ti.Vector.field(3, ti.f64, ())
         self.mean = ti.field(ti.f64, ())
         self.n[None] = self.n_max
 
@@ -205,7 +226,7 @@ class EllPCG:
         """A new solver with `max_nb` slots per row and the same settings, its x copied from this one
         (warm start); the matrix must be filled again. Its kernels compile anew (once)."""
         other = EllPCG(self.n_max, max_nb, self.tolerance, self.max_iterations, self.dtype, self.layout,
-                       self.reduction)
+                       self.reduction, self.batch)
         other.x.copy_from(self.x)
         other.n[None] = self.n[None]
         return other
@@ -329,7 +350,13 @@ class EllPCG:
         """One PCG iteration: p = z + beta p, alpha = r.z / p.Ap, x += alpha p, r -= alpha Ap; with `jacobi`
         also z = D^-1 r, r.z and the next beta (a preconditioner of its own, as the multigrid V-cycle of
         mg_pcg.py, computes them itself). Returns the recurrence |r|^2, or -1 on breakdown (p.Ap <= 0)."""
-        n = self.n[None]
+        return self._iteration(jacobi, 1)
+
+    @ti.func
+    def _iteration(self, jacobi: ti.template(), live):
+        """`_k_iterate`'s body with Taichi's reductions; with live = 0 its loops are empty and it changes
+        nothing (a batched iteration after the stop)."""
+        n = self.n[None] * live
         zero = ti.cast(0, self.dtype)
         beta = self.beta[None]
         for i in range(n):
@@ -337,7 +364,9 @@ class EllPCG:
         self.pap[None] = zero
         for i in range(n):
             self.pap[None] += self._ap_row(i)
-        alpha = self._step_length()
+        alpha = zero
+        if live == 1:
+            alpha = self._step_length()
         self.rr[None] = zero
         if ti.static(jacobi):
             self.rz_new[None] = zero
@@ -346,7 +375,10 @@ class EllPCG:
             self.rr[None] += sums[0]
             if ti.static(jacobi):
                 self.rz_new[None] += sums[1]
-        return self._finish(jacobi)
+        out = ti.cast(-1.0, ti.f64)
+        if live == 1:
+            out = self._finish(jacobi)
+        return out
 
     @ti.func
     def _ap_row(self, i):
@@ -413,21 +445,30 @@ class EllPCG:
     @ti.kernel
     def _k_iterate_two_stage(self, jacobi: ti.template()) -> ti.f64:
         """`_k_iterate` with its dot products summed in two stages (reduction "two_stage")."""
-        n = self.n[None]
+        return self._iteration_two_stage(jacobi, 1)
+
+    @ti.func
+    def _iteration_two_stage(self, jacobi: ti.template(), live):
+        """`_iteration` with its dot products summed in two stages."""
+        n = self.n[None] * live
+        threads = STAGE_THREADS * live
         zero = ti.cast(0, self.dtype)
         beta = self.beta[None]
         for i in range(n):
             self.p[i] = self.z[i] + beta * self.p[i]
-        for t in range(STAGE_THREADS):
+        for t in range(threads):
             s = zero
             i = t
             while i < n:
                 s += self._ap_row(i)
                 i += STAGE_THREADS
             self.stage[t] = ti.Vector([s, zero, zero])
-        self.pap[None] = self._folded()[0]
-        alpha = self._step_length()
-        for t in range(STAGE_THREADS):
+        folded = self._folded()  # at the kernel's top level, so that its loops run in parallel
+        alpha = zero
+        if live == 1:
+            self.pap[None] = folded[0]
+            alpha = self._step_length()
+        for t in range(threads):
             s = ti.Vector([zero, zero, zero])
             i = t
             while i < n:
@@ -437,10 +478,43 @@ class EllPCG:
                 i += STAGE_THREADS
             self.stage[t] = s
         sums = self._folded()
-        self.rr[None] = sums[0]
-        if ti.static(jacobi):
-            self.rz_new[None] = sums[1]
-        return self._finish(jacobi)
+        out = ti.cast(-1.0, ti.f64)
+        if live == 1:
+            self.rr[None] = sums[0]
+            if ti.static(jacobi):
+                self.rz_new[None] = sums[1]
+            out = self._finish(jacobi)
+        return out
+
+    @ti.kernel
+    def _k_iterate_gated(self, jacobi: ti.template(), threshold: ti.f64, limit: ti.i32):
+        """One iteration of a batch (`batch` > 1), launched without reading anything back: it runs while the
+        gate is open (no stop yet, fewer than `limit` iterations made in this batch series) and closes the
+        gate where the host loop of `solve` would stop (breakdown, a non-finite |r|^2, or |r|^2 <=
+        threshold). So a batch gives the iterates, the count and |r|^2 of one launch per iteration."""
+        live = 0
+        if self.gate[None][0] == 0.0 and self.gate[None][1] < limit:
+            live = 1
+        out = ti.cast(-1.0, ti.f64)
+        if ti.static(self.reduction == "two_stage"):
+            out = self._iteration_two_stage(jacobi, live)
+        else:
+            out = self._iteration(jacobi, live)
+        if live == 1:
+            g = self.gate[None]
+            g[1] += 1.0
+            g[2] = out
+            if not (out >= 0.0 and out > threshold):  # breakdown, non-finite or converged
+                g[0] = 1.0
+            self.gate[None] = g
+
+    @ti.kernel
+    def _k_gate_open(self):
+        self.gate[None] = ti.Vector([0.0, 0.0, 0.0])
+
+    @ti.kernel
+    def _k_gate(self) -> ti.types.vector(3, ti.f64):
+        return self.gate[None]
 
     @ti.kernel
     def _k_remove_mean(self, v: ti.template()):
@@ -479,6 +553,17 @@ class EllPCG:
         """One PCG iteration; returns the recurrence |r|^2, or -1 on breakdown."""
         return self._k_iterate_step(True)
 
+    def _iterate_batched(self, threshold: float, limit: int) -> int:
+        """Jacobi-PCG iterations in batches of `batch` launches with one read of the gate after each batch,
+        until the gate closes (the stops of `solve`'s loop) or `limit` iterations; returns their count."""
+        self._k_gate_open()
+        while True:
+            for _ in range(min(self.batch, limit)):
+                self._k_iterate_gated(True, threshold, limit)
+            stopped, made, _ = self._k_gate()
+            if stopped or made >= limit:
+                return int(made)
+
     def _k_iterate_step(self, jacobi: bool) -> float:
         """`_k_iterate` or its two-stage form, as `reduction` says."""
         if self.reduction == "two_stage":
@@ -515,8 +600,11 @@ class EllPCG:
         threshold = self.tolerance**2 * bb
         iterations = 0
         restarts = 0
+        batched = self.batch > 1 and type(self)._iterate is EllPCG._iterate
         while math.isfinite(rr) and rr > threshold and iterations < self.max_iterations:
-            while iterations < self.max_iterations:
+            if batched:
+                iterations += self._iterate_batched(threshold, self.max_iterations - iterations)
+            while not batched and iterations < self.max_iterations:
                 rr_rec = self._iterate()
                 iterations += 1
                 if not rr_rec >= 0.0 or rr_rec <= threshold:  # breakdown, non-finite or converged
