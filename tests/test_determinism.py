@@ -121,3 +121,52 @@ def test_blocked_prefix_sums_leave_the_steps_as_they_were(tmp_path):
     cells, the moving list; sph/scan.py), forced here on the CPU, give every particle's position, velocity
     and pressure of the serial ones bit for bit, after 10 steps of a collapsing column in both modes."""
     assert "same" in _run_script(tmp_path / "scan.py", SCAN_SCRIPT)
+
+
+RETURN_SCRIPT = r"""
+import numpy as np
+import taichi as ti
+
+ti.init(arch=ti.cpu, default_fp=ti.f32, cpu_max_num_threads=1, log_level=ti.WARN)
+from taichi_sph.config import load_config
+from taichi_sph.config.load import read_yaml
+from taichi_sph.scene import build_scene
+from taichi_sph.solvers import make_solver
+from taichi_sph.wcsph import solver as wsolver
+
+water = {"mode": "wcsph_biot", "dim": 2, "dx": 0.01, "end_time": 1.0, "dt": "auto",
+         "tank": {"size": [0.3, 0.2]}, "water": [{"min": [0, 0], "max": [0.1, 0.15]}]}
+soil = read_yaml("configs/consolidation.yaml")
+soil.pop("variants", None)
+piston = dict(water, obstacles=[{"min": [0.25, 0.0], "max": [0.27, 0.12],
+                                 "motion": {"velocity": [-0.2, 0.0], "ramp": 0.005}}])
+for name, data in {"water": water, "soil": soil, "piston": piston}.items():
+    states = []
+    for returned in (False, True):
+        wsolver.RETURN_REDUCTIONS = returned
+        cfg = load_config(data=data)
+        s = make_solver(cfg, build_scene(cfg))
+        assert s.returns_reductions == returned
+        s.motion._host_arrays = not returned  # the bodies' motion by value, as on GPUs
+        assert s.motion.any == (name == "piston")
+        s.initial_diagnostics()
+        reds = []
+        for _ in range(10):
+            s.step(s.propose_dt()[0])
+            reds.append(np.concatenate([s.red_kick, s.red_pairs]))
+        f = s.fields_by_id()
+        states.append((f["position"], f["velocity"], f["pressure"], np.array(reds)))
+    for a, b in zip(*states):
+        assert np.array_equal(a, b), name
+    assert np.abs(states[0][1]).max() > 0.0, name
+print("same")
+"""
+
+
+def test_returned_reductions_leave_the_steps_as_they_were(tmp_path):
+    """The step's reductions returned by its kernels and a moving body's velocity passed by value (GPUs'
+    ways: wcsph/solver.py RETURN_REDUCTIONS, sph/wall_motion.py), forced here on the CPU, give the
+    reductions, and every particle's position, velocity and pressure, of the host arrays bit for bit, after
+    10 steps of a collapsing column, of the consolidation column and of a column pushed by a piston (f32:
+    the reductions pass through f64 and back exactly)."""
+    assert "same" in _run_script(tmp_path / "returned.py", RETURN_SCRIPT)

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
+from ..backend import on_cpu
 from . import operators
 
 
@@ -91,6 +92,9 @@ class WallMotion:
     def __init__(self, scene, dim: int, period):
         self.motions = list(scene.motions)
         self.dim = dim
+        # the bodies' motion reaches the device through host arrays on the CPU (one launch for all
+        # bodies), by value on GPUs (`set_step`)
+        self._host_arrays = on_cpu()
         self.period = period
         self.periodic = any(v > 0.0 for v in period)
         n = scene.n
@@ -115,9 +119,17 @@ class WallMotion:
 
     def set_step(self, t0: float, t1: float) -> None:
         """Velocity of every body over the step [t0, t1] and its displacement at t1."""
-        if self.motions:
+        if not self.motions:
+            return
+        if self._host_arrays:
             self._k_set(np.stack([m.step_velocity(t0, t1) for m in self.motions]).astype(np.float64),
                         np.stack([m.displacement(t1) for m in self.motions]).astype(np.float64))
+            return
+        for b, m in enumerate(self.motions):  # GPUs: by value, one launch per body (most scenes have one)
+            vel, disp = np.zeros(3), np.zeros(3)
+            vel[: self.dim] = m.step_velocity(t0, t1)
+            disp[: self.dim] = m.displacement(t1)
+            self._k_set_one(b, vel, disp)
 
     @ti.kernel
     def _k_set(self, vel: ti.types.ndarray(), disp: ti.types.ndarray()):
@@ -128,6 +140,14 @@ class WallMotion:
             for d in ti.static(range(self.dim)):
                 self.vel[b][d] = ti.cast(vel[b, d], float)
                 self.disp[b][d] = disp[b, d]
+
+    @ti.kernel
+    def _k_set_one(self, b: ti.i32, vel: ti.types.vector(3, ti.f64), disp: ti.types.vector(3, ti.f64)):
+        """Body b's velocity and displacement passed by value (GPUs: a host array argument costs Taichi a
+        device buffer allocated, copied and freed at every launch there)."""
+        for d in ti.static(range(self.dim)):
+            self.vel[b][d] = ti.cast(vel[d], float)
+            self.disp[b][d] = disp[d]
 
     @ti.func
     def position(self, i):

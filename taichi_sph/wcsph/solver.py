@@ -62,6 +62,15 @@ log = logging.getLogger("taichi_sph")
 H_MIN, H_MAX = 0.5, 1.1
 #: reductions of the fluid's pair pass (the soil's follow them in the same buffer, soil_step.NRED_SOIL)
 _NRED = 9
+#: length of the vector the step's kernels return their reductions in where they return them (GPUs): at
+#: least _NRED plus the soil's (6 + dim + 1)
+_NRET = 20
+#: whether the step's kernels return their reductions (True) or write them into host arrays passed as
+#: arguments (False); None: return them on GPUs. On the CPU an external host array is passed by pointer and
+#: written in place, the cheapest way back; on CUDA Taichi copies such an array to a device buffer it
+#: allocates, synchronises and copies it back and frees the buffer at every launch (several driver calls
+#: per launch), where a kernel's return value comes back in one copy of its result buffer.
+RETURN_REDUCTIONS: bool | None = None
 #: largest timestep.cfl at which the one-pass step damps every acoustic mode: z = omega dt < 0.708 with the
 #: fastest lattice mode omega = c G_max, G_max dx = 0.901 (2D) / 0.923 (3D), dt = cfl 1.2 dx / c
 CFL_STABLE = 0.64
@@ -319,7 +328,10 @@ class WCSPHSolver(SolverCommon):
         self.last = {}
         # the two kernels of every step, bound once: reading a kernel off a data-oriented object makes a new
         # bound method at each access (the levee of 1489 moving particles: 2 % less CPU per step, 4 rounds)
-        self._step_kernels = (self._k_kick_drift, self._k_pairs)
+        self.returns_reductions = (not on_cpu()) if RETURN_REDUCTIONS is None else bool(RETURN_REDUCTIONS)
+        assert len(self.red_pairs) <= _NRET
+        self._step_kernels = ((self._k_kick_drift_ret, self._k_pairs_ret) if self.returns_reductions
+                              else (self._k_kick_drift, self._k_pairs))
 
     # ------------------------------------------------------------------ materials
     @ti.func
@@ -508,6 +520,19 @@ class WCSPHSolver(SolverCommon):
 
     @ti.kernel
     def _k_kick_drift(self, dt: float, dt_prev: float, w1: float, w2: float, out: ti.types.ndarray()):
+        """`_kick_drift`, its two reductions written into `out` (a host array: the CPU's way)."""
+        red = self._kick_drift(dt, dt_prev, w1, w2)
+        out[0] = red[0]
+        out[1] = red[1]
+
+    @ti.kernel
+    def _k_kick_drift_ret(self, dt: float, dt_prev: float, w1: float, w2: float) -> ti.types.vector(2, ti.f64):
+        """`_kick_drift`, its two reductions returned (GPUs: RETURN_REDUCTIONS)."""
+        red = self._kick_drift(dt, dt_prev, w1, w2)
+        return ti.Vector([ti.cast(red[0], ti.f64), ti.cast(red[1], ti.f64)])
+
+    @ti.func
+    def _kick_drift(self, dt, dt_prev, w1, w2):
         """Leap-frog (eq 48): kick with a^n, drift with v^{n+1/2} plus the XSPH correction (eq 53); then the
         packed views of the pair pass (`_pack_s`, `_pack_q`). Returns the largest squared displacement
         since the last list build and the largest h the pair pass will use."""
@@ -544,8 +569,7 @@ class WCSPHSolver(SolverCommon):
                         self.s[i][self.S_V + d] = vb[d]
                     dd = operators.rel(xn, self.x0[i], self.period)
                     ti.atomic_max(d2max, ti.cast(dd.dot(dd), float))
-        out[0] = d2max
-        out[1] = hmax
+        return ti.Vector([d2max, hmax])
 
     @ti.kernel
     def _k_normalise(self, dt: float, w1: float, w2: float):
@@ -622,7 +646,8 @@ class WCSPHSolver(SolverCommon):
     @ti.kernel
     def _k_pairs(self, dt: float, out: ti.types.ndarray()):
         """The fluid's pair pass (`_fluid_pass`), then the soil's passes (soil_step.SoilPasses.passes): one
-        launch, loops one after the other; the reductions of all of them go into `out`."""
+        launch, loops one after the other; the reductions of all of them go into `out` (a host array: the
+        CPU's way)."""
         red = self._fluid_pass(dt)
         for k in ti.static(range(_NRED)):
             out[k] = red[k]
@@ -630,6 +655,19 @@ class WCSPHSolver(SolverCommon):
             rs = self.soil.passes(dt)
             for k in ti.static(range(self.soil.nred)):
                 out[_NRED + k] = rs[k]
+
+    @ti.kernel
+    def _k_pairs_ret(self, dt: float) -> ti.types.vector(_NRET, ti.f64):
+        """`_k_pairs` with its reductions returned, zero-padded to _NRET (GPUs: RETURN_REDUCTIONS)."""
+        out = ti.Vector.zero(ti.f64, _NRET)
+        red = self._fluid_pass(dt)
+        for k in ti.static(range(_NRED)):
+            out[k] = ti.cast(red[k], ti.f64)
+        if ti.static(self.has_soil):
+            rs = self.soil.passes(dt)
+            for k in ti.static(range(self.soil.nred)):
+                out[_NRED + k] = ti.cast(rs[k], ti.f64)
+        return out
 
     @ti.func
     def _fluid_pass(self, dt):
@@ -848,7 +886,10 @@ class WCSPHSolver(SolverCommon):
     def _pairs(self, dt: float):
         """The pair pass and the soil's passes (one kernel), then their reductions: diagnostics, the
         non-finite checks (the fluid's first)."""
-        self._step_kernels[1](dt, self.red_pairs)
+        if self.returns_reductions:
+            self.red_pairs[:] = self._step_kernels[1](dt).to_numpy()[: len(self.red_pairs)]
+        else:
+            self._step_kernels[1](dt, self.red_pairs)
         self.rates_known = min(self.rates_known + 1, 2)
         self.red = self.red_pairs[:_NRED].copy()
         r = self.red
@@ -865,7 +906,10 @@ class WCSPHSolver(SolverCommon):
         if self.moving:
             self.motion.set_step(self.time, self.time + dt)
         w = self._weights(dt)
-        self._step_kernels[0](dt, self.dt_prev, w[0], w[1], self.red_kick)
+        if self.returns_reductions:
+            self.red_kick[:] = self._step_kernels[0](dt, self.dt_prev, w[0], w[1]).to_numpy()
+        else:
+            self._step_kernels[0](dt, self.dt_prev, w[0], w[1], self.red_kick)
         d2max, hmax = self.red_kick
         if self.variable_h:
             self.hmax = float(hmax)
