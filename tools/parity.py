@@ -16,7 +16,7 @@ default; CUDA supports it), and the two run files are compared frame by frame. T
 Cases: the hydrostatic tank in both modes, the dam break in both modes, the seed's free fall (coarse),
 and the consolidation column. Each has its tolerance (TOLERANCES; the reason is beside it).
 
-    python tools/parity.py [--cases hydrostatic_isph ...] [--precision f64] [--out-dir DIR] [--json F]
+    python tools/parity.py [--cases hydrostatic_isph ...] [--precision f64] [--jobs 4] [--out-dir DIR] [--json F]
 
 Exits 1 when a case differs by more than its tolerance, 2 when a run fails.
 """
@@ -24,6 +24,7 @@ Exits 1 when a case differs by more than its tolerance, 2 when a run fails.
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import json
 import os
 import subprocess
@@ -170,24 +171,28 @@ def main(argv=None) -> int:
     ap.add_argument("--against", default="cuda", choices=["cpu", "cuda"], help="backend compared with the CPU")
     ap.add_argument("--out-dir", type=Path)
     ap.add_argument("--timeout", type=float, default=600.0)
+    ap.add_argument("--jobs", type=int, default=1, help="cases at once (each its CPU run, then its GPU run); "
+                    "the seconds reported are then those of a shared machine")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     out_dir = args.out_dir or Path(tempfile.mkdtemp(prefix="parity_"))
     out_dir.mkdir(parents=True, exist_ok=True)
-    rows, failed_runs = [], 0
     for arch in ("cpu", args.against):
         (out_dir / arch).mkdir(exist_ok=True)
-    for case in args.cases:
+    def one(case):
         a, ta, ea = run(case, "cpu", args.precision, out_dir / "cpu", args.timeout)
         b, tb, eb = run(case, args.against, args.precision, out_dir / args.against, args.timeout)
         row = {"case": case, "cpu_seconds": ta, f"{args.against}_seconds": tb}
         if ea or eb:
             row["error"] = ea or eb
-            failed_runs += 1
         else:
             row.update(compare(case, a, b))
-        rows.append(row)
         print(json.dumps(row), flush=True)
+        return row
+
+    with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        rows = list(pool.map(one, args.cases))
+    failed_runs = sum("error" in r for r in rows)
     print()
     print(markdown(rows, args))
     if args.json:
