@@ -45,18 +45,19 @@ measures both.
 Solver: preconditioned CG (Hestenes-Stiefel) with M = diag(A), starting from the x already in the
 field. Each iteration is one kernel launch (p update, matvec with the p.Ap reduction, x/r/z update
 with the r.r and r.z reductions) that returns one scalar, |r|^2, to the host; no vector leaves the
-device. On CUDA (`batch="auto"`: BATCH_GPU) Jacobi-PCG launches its iterations in batches without reading
-anything back, and reads a gate kept on the device once per batch: an iteration runs only while the gate
-is open and closes it where the host loop would have stopped (breakdown, non-finite, converged, the
-iteration limit), so a batch gives the same iterates, count and residual as one read per iteration
-(tests/test_ell_pcg.py, bit for bit on the CPU) without the host waiting on every launch. Measured on an
-H100 with one read per iteration: 0.27-0.34 ms an iteration at 10k to 1M rows, of which the bytes need
-0.1-0.15 ms at 1M (docs/performance.md, "GPU"); the batches are not yet timed there. When the recurrence says |r| / |b| <= tolerance, the true residual b - A x is computed; if it
+device. When the recurrence says |r| / |b| <= tolerance, the true residual b - A x is computed; if it
 is above the tolerance (round-off drift, f32), CG restarts from the true residual, at most
 MAX_RESTARTS times, within `max_iterations` iterations in all. A zero right-hand side gives x = 0.
 A matrix whose null space is the constants (a PPE without any Dirichlet row: a closed or periodic box
 full of water) is solved with `zero_mean=True`: b is projected onto the range of A (its mean
 removed), CG converges in that range, and the zero-mean solution is returned.
+Batched iterations on CUDA (`batch="auto"`: BATCH_GPU): Jacobi-PCG launches its iterations in batches
+without reading anything back, and reads a gate kept on the device once per batch. An iteration runs
+only while the gate is open and closes it where the host loop would have stopped (breakdown, non-finite,
+converged, the iteration limit), so a batch gives the same iterates, count and residual as one read per
+iteration (tests/test_ell_pcg.py, bit for bit on the CPU) without the host waiting on every launch.
+Measured on an H100 with one read per iteration: 0.27-0.34 ms an iteration at 10k to 1M rows, of which
+the bytes need 0.1-0.15 ms at 1M (docs/performance.md, "GPU"); the batches are not yet timed there.
 Dot products on CUDA (`reduction="auto"`): Taichi 1.7.4 reduces a sum into one scalar by giving
 each GPU thread its partial sum and then adding the partials with one atomic per thread into that
 scalar; its CUDA runtime combines a warp's partials first only for f32 and i32. In f64 every launched
