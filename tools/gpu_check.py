@@ -11,8 +11,8 @@ device time (`profile`: tools/bench.py --kernel-profile). A check that overruns 
         [--budget freefall=90 ...] [--scale 1.0] [--arch cpu]
 
 `--only` runs those checks in the order given (after `start`), so that the ones that matter most come
-first when device time is short. For a GPU lent for about 15 minutes (its start included), one call of
-about 10 minutes:
+first when device time is short. With about 15 minutes of GPU time (the machine's start included), one
+call of about 10 minutes:
 
     python tools/gpu_check.py --out DIR --only profile bandwidth freefall tests parity bench \
         --budget profile=100 bandwidth=60 freefall=90 tests=120 parity=150 bench=90
