@@ -107,7 +107,7 @@ def bench_size(ti, name: str, shape, dtype, layout: str, iterations: int, reduct
     offs, coef = lattice_offsets(dim)
     width = len(offs)
     ell = EllPCG(n, width, tolerance=1e-30, max_iterations=iterations, dtype=dtype, layout=layout,
-                 reduction=reduction)
+                 reduction=reduction, batch=batch)
     strides = [int(np.prod(shape[k + 1:])) for k in range(dim)]
     top = shape[-1]
     off_f = ti.Vector.field(dim, ti.i32, width)
@@ -161,21 +161,11 @@ def bench_size(ti, name: str, shape, dtype, layout: str, iterations: int, reduct
     # the same iterations in batches of `batch` launches, the convergence state read once per batch
     # (EllPCG's `batch`, the CUDA default): the launches queue without the host waiting on each
     ell._restart()
-    ell._k_gate_open()
-    for _ in range(2):  # warm-up (compiles)
-        ell._k_iterate_gated(True, 0.0, 1 << 30)
-    ell._k_gate()
+    ell._iterate_batched(0.0, 2)  # warm-up (compiles)
     ell._restart()
-    ell._k_gate_open()
     ti.sync()
     t0 = time.perf_counter()
-    done = 0
-    while done < iterations:
-        k = min(batch, iterations - done)
-        for _ in range(k):
-            ell._k_iterate_gated(True, 0.0, 1 << 30)  # threshold 0: runs on, as the loop above
-        ell._k_gate()
-        done += k
+    ell._iterate_batched(0.0, iterations)  # threshold 0: runs on to the limit, as the loop above
     ti.sync()
     per_iter_batched = (time.perf_counter() - t0) / iterations
     f = 8 if dtype == ti.f64 else 4

@@ -441,17 +441,13 @@ class MGPCG(EllPCG):
                 acc = zero
                 i = t
                 while i < n:
-                    zi = self.t0[i] + self.inv_diag[i] * (self.r[i] - self.row_times(i, self.t0))
-                    self.z[i] = zi
-                    acc += self.r[i] * zi
+                    acc += self._second_sweep(i)
                     i += STAGE_THREADS
                 self.stage[t] = ti.Vector([acc, zero, zero])
             self.rz_new[None] = self._folded()[0]
         else:
             for i in range(n):
-                zi = self.t0[i] + self.inv_diag[i] * (self.r[i] - self.row_times(i, self.t0))
-                self.z[i] = zi
-                self.rz_new[None] += self.r[i] * zi
+                self.rz_new[None] += self._second_sweep(i)
         rz = self.rz[None]
         new = self.rz_new[None]
         beta = ti.cast(0, self.dtype)
@@ -459,6 +455,13 @@ class MGPCG(EllPCG):
             beta = new / rz
         self.beta[None] = beta
         self.rz[None] = new
+
+    @ti.func
+    def _second_sweep(self, i):
+        """Level 0's second Jacobi sweep at row i: z_i from t0; returns r_i z_i, row i's share of r.z."""
+        zi = self.t0[i] + self.inv_diag[i] * (self.r[i] - self.row_times(i, self.t0))
+        self.z[i] = zi
+        return self.r[i] * zi
 
     @ti.func
     def _down(self, l):

@@ -324,12 +324,13 @@ class WCSPHSolver(SolverCommon):
         # straight into these host arrays (external-array arguments: no read-back launch, no per-element
         # reads, which cost ~2.5 us each)
         self.red_kick = np.zeros(2, self.np_fp)
-        self.red_pairs = np.zeros(_NRED + (self.soil.nred if self.has_soil else 0), self.np_fp)
+        self.n_red = _NRED + (self.soil.nred if self.has_soil else 0)
+        self.red_pairs = np.zeros(self.n_red, self.np_fp)
         self.last = {}
         # the two kernels of every step, bound once: reading a kernel off a data-oriented object makes a new
         # bound method at each access (the levee of 1489 moving particles: 2 % less CPU per step, 4 rounds)
         self.returns_reductions = (not on_cpu()) if RETURN_REDUCTIONS is None else bool(RETURN_REDUCTIONS)
-        assert len(self.red_pairs) <= _NRET
+        assert self.n_red <= _NRET
         self._step_kernels = ((self._k_kick_drift_ret, self._k_pairs_ret) if self.returns_reductions
                               else (self._k_kick_drift, self._k_pairs))
 
@@ -645,29 +646,30 @@ class WCSPHSolver(SolverCommon):
 
     @ti.kernel
     def _k_pairs(self, dt: float, out: ti.types.ndarray()):
-        """The fluid's pair pass (`_fluid_pass`), then the soil's passes (soil_step.SoilPasses.passes): one
-        launch, loops one after the other; the reductions of all of them go into `out` (a host array: the
-        CPU's way)."""
-        red = self._fluid_pass(dt)
-        for k in ti.static(range(_NRED)):
+        """`_pair_passes`, its reductions written into `out` (a host array: the CPU's way)."""
+        red = self._pair_passes(dt)
+        for k in ti.static(range(self.n_red)):
             out[k] = red[k]
-        if ti.static(self.has_soil):
-            rs = self.soil.passes(dt)
-            for k in ti.static(range(self.soil.nred)):
-                out[_NRED + k] = rs[k]
 
     @ti.kernel
     def _k_pairs_ret(self, dt: float) -> ti.types.vector(_NRET, ti.f64):
-        """`_k_pairs` with its reductions returned, zero-padded to _NRET (GPUs: RETURN_REDUCTIONS)."""
+        """`_pair_passes`, its reductions returned, zero-padded to _NRET (GPUs: RETURN_REDUCTIONS)."""
         out = ti.Vector.zero(ti.f64, _NRET)
-        red = self._fluid_pass(dt)
-        for k in ti.static(range(_NRED)):
+        red = self._pair_passes(dt)
+        for k in ti.static(range(self.n_red)):
             out[k] = ti.cast(red[k], ti.f64)
-        if ti.static(self.has_soil):
-            rs = self.soil.passes(dt)
-            for k in ti.static(range(self.soil.nred)):
-                out[_NRED + k] = ti.cast(rs[k], ti.f64)
         return out
+
+    @ti.func
+    def _pair_passes(self, dt):
+        """The fluid's pair pass (`_fluid_pass`), then the soil's passes (soil_step.SoilPasses.passes): one
+        launch, loops one after the other; the reductions of all of them in one vector (the fluid's
+        _NRED, then the soil's)."""
+        red = self._fluid_pass(dt)
+        if ti.static(not self.has_soil):
+            return red
+        rs = self.soil.passes(dt)
+        return ti.Vector([red[k] for k in ti.static(range(_NRED))] + [rs[k] for k in ti.static(range(self.soil.nred))])
 
     @ti.func
     def _fluid_pass(self, dt):
@@ -887,7 +889,7 @@ class WCSPHSolver(SolverCommon):
         """The pair pass and the soil's passes (one kernel), then their reductions: diagnostics, the
         non-finite checks (the fluid's first)."""
         if self.returns_reductions:
-            self.red_pairs[:] = self._step_kernels[1](dt).to_numpy()[: len(self.red_pairs)]
+            self.red_pairs[:] = self._step_kernels[1](dt).to_numpy()[: self.n_red]
         else:
             self._step_kernels[1](dt, self.red_pairs)
         self.rates_known = min(self.rates_known + 1, 2)
