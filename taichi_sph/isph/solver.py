@@ -196,7 +196,11 @@ class ISPHSolver(SolverCommon):
         self.body_open = ti.field(ti.i32, n)
         self.body_pick = ti.field(ti.i64, n)
         self.body_size = ti.field(ti.i32, n)
+        #: per neighbour slot whether the pair is water of one body (_water_pair), read once per step by
+        #: _k_body_init and then by every sweep
+        self.body_link = ti.field(ti.i8, (n, self.max_nb) if self.porous else (1, 1))
         self.closed_bodies = ti.field(ti.i32, ())
+        self.body_changed = ti.field(ti.i32, ())
         self.any_free = ti.field(ti.i32, ())
         self.grad_c = ti.Vector.field(dim, float, n)
         #: pressure gradient of a water particle next to a wall, from its water neighbours (corrected
@@ -484,12 +488,18 @@ class ISPHSolver(SolverCommon):
         fewest water neighbours, which fixes its pressure level and keeps it incompressible. Bodies are
         found by propagating the lowest index through the water pairs, BODY_SWEEPS times; a body not
         settled by then (wider than that many pair hops) is left as it is: it is large, and a large body
-        has a surface the tests find. Only with porous ground
+        has a surface the tests find. The pair test (`_water_pair`) is taken once per step into
+        `body_link`, and the sweeps stop at the first that changes no label (the labels are then final):
+        the same labels as six full sweeps, at a third of the cost (coarse free fall, 2 threads: 2.3
+        against 6.9 ms of a 28-41 ms step). Only with porous ground
         (`soil`): in free water eq 34's count finds every drop (a body of fewer than N_surf particles has
-        no particle with N_surf neighbours), and the pass costs ~5 % of a small step (800 particles)."""
+        no particle with N_surf neighbours)."""
         self._k_body_init()
         for _ in range(BODY_SWEEPS):
+            self.body_changed[None] = 0
             self._k_body_sweep()
+            if self.body_changed[None] == 0:
+                break
         self._k_body_close()
 
     @ti.func
@@ -515,6 +525,9 @@ class ISPHSolver(SolverCommon):
             self.body_open[i] = 0
             self.body_pick[i] = ti.i64(1) << 62
             self.body_size[i] = 0
+            if self.solve_mask[i] == 1:
+                for k in range(self.grid.nbr_count[i]):
+                    self.body_link[i, k] = ti.cast(self._water_pair(i, self.grid.nbr[i, k]), ti.i8)
 
     @ti.kernel
     def _k_body_sweep(self):
@@ -522,10 +535,10 @@ class ISPHSolver(SolverCommon):
             if self.solve_mask[i] == 1:
                 lowest = self.body[i]
                 for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
-                    if self._water_pair(i, j) == 1:
-                        lowest = ti.min(lowest, self.body[j])
-                ti.atomic_min(self.body[i], lowest)
+                    if self.body_link[i, k] == 1:
+                        lowest = ti.min(lowest, self.body[self.grid.nbr[i, k]])
+                if ti.atomic_min(self.body[i], lowest) > lowest:
+                    self.body_changed[None] = 1
 
     @ti.kernel
     def _k_body_close(self):
@@ -539,10 +552,9 @@ class ISPHSolver(SolverCommon):
                     self.any_free[None] = 1
                 count = 0
                 for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
-                    if self._water_pair(i, j) == 1:
+                    if self.body_link[i, k] == 1:
                         count += 1
-                        if self.body[j] != b:
+                        if self.body[self.grid.nbr[i, k]] != b:
                             self.body_open[b] = 1
                 ti.atomic_min(self.body_pick[b], ti.i64(count) * ti.i64(self.n) + ti.i64(i))
                 ti.atomic_add(self.body_size[b], 1)
