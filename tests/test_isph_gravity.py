@@ -52,11 +52,15 @@ def test_lone_particle_and_droplet_fall_freely(ti_cpu, dim, gradient):
     from taichi_sph.isph.solver import ISPHSolver
     from taichi_sph.scene import build_scene
 
+    # one solver for both time steps (the step takes dt; the second run starts from the saved state at
+    # t = 0, as a resumed run does): the kernels are compiled once
+    cfg = _scene(dim, gradient, 0.001)
+    scene = build_scene(cfg)
+    solver = ISPHSolver(cfg, scene)
+    solver.initial_diagnostics()
+    start = solver.state()
     for dt, bound in ((0.001, 0.008), (0.0005, 0.004)):
-        cfg = _scene(dim, gradient, dt)
-        scene = build_scene(cfg)
-        solver = ISPHSolver(cfg, scene)
-        solver.initial_diagnostics()
+        solver.load_state(start)
         ids = solver.ids.to_numpy()
         x0 = np.empty((solver.n, dim))
         x0[ids] = solver.x.to_numpy()
@@ -97,5 +101,6 @@ def test_lone_particle_and_droplet_fall_freely(ti_cpu, dim, gradient):
             assert abs(x[lone, 0].mean() - x0[lone, 0].mean()) < 1e-6
             assert abs(x[drop, 0].mean() - x0[drop, 0].mean()) < 1e-6
         assert t > 0.2
+        print(f"dim {dim} {gradient} dt {dt}: speed {worst_speed:.3g} position {worst_pos:.4g}")
         assert worst_speed < 5e-4, (dt, worst_speed)
         assert worst_pos < bound, (dt, worst_pos)
