@@ -66,6 +66,17 @@ def run_cli():
     return _run
 
 
+@pytest.fixture(scope="session")
+def soil_column_run(tmp_path_factory):
+    """configs/soil_column.yaml as shipped (saturated, k 1 mm/s, 0.2 s), run once per worker: the column at
+    rest (tests/test_soil.py) and stage 1 of the two-stage column (tests/test_levee.py), both marked
+    xdist_group("soil_column") so that one worker runs it. Returns (path, CompletedProcess)."""
+    out = tmp_path_factory.mktemp("soil_column") / "s1.h5"
+    cmd = [sys.executable, "-m", "taichi_sph.cli", "--config", "configs/soil_column.yaml", "--out", str(out),
+           "--no-progress"]
+    return out, subprocess.run(cmd, cwd=ROOT, env=cli_env(), capture_output=True, text=True, timeout=900)
+
+
 def surge_front_series(path, a):
     """Dam break in a run file: T = t sqrt(2 g / a) and Z = z / a, z the surge front (the edge of the water
     body on the line of the first particle layer, `taichi_sph.probes.surge_front`)."""

@@ -21,7 +21,8 @@ def _soil_frame(path, k):
         return f["position"][soil], f["effective_stress"][soil], f["plastic_strain"][soil], rf.dx
 
 
-def test_two_stage_column(run_cli, tmp_path):
+@pytest.mark.xdist_group("soil_column")  # stage 1 is the shared run of the column at rest
+def test_two_stage_column(run_cli, tmp_path, soil_column_run):
     """configs/soil_column.yaml (saturated, 0.30 m): stage 1 the geostatic stage (K0 start, damping
     20 1/s, 0.2 s), stage 2 starts from its last frame (`wcsph.soil.start_from`) without damping for
     0.1 s. Stage 2's start must carry stage 1's end state exactly (positions, stress, plastic strain), with
@@ -29,8 +30,7 @@ def test_two_stage_column(run_cli, tmp_path):
     0.997-1.012 below 0.1 m depth, the top rows carry a kernel-truncation error; with eq 36 at c0 and no
     density diffusion, the defaults before: 1.004, 0.999-1.015), and the undamped second stage must settle
     less than 0.5 % of H (measured 9e-7 H; 8e-7 H)."""
-    s1, s2 = tmp_path / "s1.h5", tmp_path / "s2.h5"
-    r = run_cli("--config", "configs/soil_column.yaml", "--out", s1, "--no-progress")
+    (s1, r), s2 = soil_column_run, tmp_path / "s2.h5"
     assert r.returncode == 0, r.stderr
     r = run_cli("--config", "configs/soil_column.yaml", "--set", f"wcsph.soil.start_from.run={s1}",
                 "--set", "wcsph.soil.damping=0", "--set", "end_time=0.1", "--out", s2, "--no-progress")
