@@ -98,11 +98,21 @@ def test_layered_ground_gives_two_plateaus(ti_cpu):
     assert np.all(np.diff(eps[band]) >= -1e-12)
 
 
-def test_markers_stored_in_the_run_file(run_cli, tmp_path):
+@pytest.fixture(scope="module")
+def freefall_coarse(tmp_path_factory):
+    """configs/freefall.yaml, variant coarse, as shipped (2.5 s), run once: its run file and the CLI's
+    CompletedProcess. The tests that read it are marked xdist_group("freefall_coarse")."""
+    out = tmp_path_factory.mktemp("ff") / "ff.h5"
+    r = subprocess.run([sys.executable, "-m", "taichi_sph.cli", "--config", "configs/freefall.yaml", "--variant",
+                        "coarse", "--out", str(out), "--no-progress"],
+                       cwd=ROOT, env=cli_env(), capture_output=True, text=True, timeout=900)
+    return out, r
+
+
+@pytest.mark.xdist_group("freefall_coarse")  # reads the free fall's run (fixture freefall_coarse)
+def test_markers_stored_in_the_run_file(freefall_coarse):
     """/markers holds the SPEC 8 names; the seed's 21 x 21 x 21 markers lie inside the tank."""
-    out = tmp_path / "ff.h5"
-    r = run_cli("--config", "configs/freefall.yaml", "--variant", "coarse", "--set", "end_time=0.004",
-                "--set", "output.every=0.002", "--out", out, "--no-progress")
+    out, r = freefall_coarse
     assert r.returncode == 0, r.stderr
     with RunFile(out) as rf:
         pos = rf.h5["markers/position"][...]
@@ -329,7 +339,8 @@ def test_permeameter_core_holds_its_pore_volume(permeameter_runs):
         assert np.all(np.abs(fill[late] - 1.0) < 0.10), (dt, fill[late].min(), fill[late].max())
 
 
-def test_freefall_coarse_volume_and_fraction_in_layer(run_cli, tmp_path):
+@pytest.mark.xdist_group("freefall_coarse")  # its run is shared with test_markers_stored_in_the_run_file
+def test_freefall_coarse_volume_and_fraction_in_layer(freefall_coarse):
     """The seed's free fall (configs/freefall.yaml, variant coarse: dx 2 cm, 1000 water particles,
     the seed's dt 1 ms, alpha 0.01) over its 2.5 s, with the default surface test in the ground (the
     cone, air only from the air, the tension rule, no gradient correction inside saturated coarse
@@ -348,8 +359,7 @@ def test_freefall_coarse_volume_and_fraction_in_layer(run_cli, tmp_path):
       measure reads -3.7 % at 0.04 s (the cube's bottom layer entering the ground) and stays within
       -1.2..+1.3 % after 0.1 s (eq 34's count alone: -4.4..-5.7 % while the water passes the layer);
       bound 5 %, which a loss of the water entering the ground would exceed."""
-    out = tmp_path / "ff.h5"
-    r = run_cli("--config", "configs/freefall.yaml", "--variant", "coarse", "--out", out, "--no-progress")
+    out, r = freefall_coarse
     assert r.returncode == 0, r.stderr
     with RunFile(out) as rf:
         water = rf.kind == 0
