@@ -3,12 +3,17 @@ landside toe yielding first, a dry levee wetting), heave behind the sheet pile o
 and the flow-net reference for that heave. Full runs: tools/seepage_failure.py, docs/levee.md and
 docs/sheetpile.md."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
 from taichi_sph.io.hdf5 import RunFile
 from taichi_sph.wcsph.failure import yield_sequence
 from taichi_sph.wcsph.flownet import harr_prism_ratio, prism_ratio
+
+from .conftest import ROOT, cli_env
 
 SOIL = 2
 
@@ -39,8 +44,19 @@ def _soil_end_state(path):
     return float(np.linalg.norm(x1 - x0, axis=1).max()), float(eps.max())
 
 
-@pytest.mark.parametrize("dx", [0.01, 0.02])
-def test_levee_stage1_stands(run_cli, tmp_path, dx):
+@pytest.fixture(scope="module")
+def levee_stage1_coarse(tmp_path_factory):
+    """configs/embankment.yaml, variant geostatic (stage 1) at dx 0.02, run once for the tests marked
+    xdist_group("levee_stage1"): its run file and the CLI's CompletedProcess."""
+    out = tmp_path_factory.mktemp("levee") / "s1.h5"
+    r = subprocess.run([sys.executable, "-m", "taichi_sph.cli", "--config", "configs/embankment.yaml", "--variant",
+                        "geostatic", "--set", "dx=0.02", "--out", str(out), "--no-progress"],
+                       cwd=ROOT, env=cli_env(), capture_output=True, text=True, timeout=900, check=False)
+    return out, r
+
+
+@pytest.mark.parametrize("dx", [0.01, pytest.param(0.02, marks=pytest.mark.xdist_group("levee_stage1"))])
+def test_levee_stage1_stands(run_cli, tmp_path, dx, request):
     """configs/embankment.yaml, stage 1 (`geostatic`: the river at 0.10 m, the pore water below a phreatic
     line inside the levee, the K0 start, damping 400 1/s, 0.3 s). The acceptance: largest soil
     displacement below 1 mm and no particle beyond a plastic strain of 1e-3. Measured: 0.029 mm and
@@ -50,9 +66,12 @@ def test_levee_stage1_stands(run_cli, tmp_path, dx):
     1 mm (measured 0.006 mm) and the largest plastic strain grown by less than 5e-4 (measured 1.0e-4, in
     the crest's core; a slip would take it past 1e-2): the damping does not hide a levee that would not
     stand."""
-    s1 = tmp_path / "s1.h5"
-    r = run_cli("--config", "configs/embankment.yaml", "--variant", "geostatic", "--set", f"dx={dx}",
-                "--out", s1, "--no-progress")
+    if dx == 0.02:  # shared with the first-yield test
+        s1, r = request.getfixturevalue("levee_stage1_coarse")
+    else:
+        s1 = tmp_path / "s1.h5"
+        r = run_cli("--config", "configs/embankment.yaml", "--variant", "geostatic", "--set", f"dx={dx}",
+                    "--out", s1, "--no-progress")
     assert r.returncode == 0, r.stderr
     disp, eps = _soil_end_state(s1)
     assert disp < 1e-3 and eps < 1e-3, (dx, disp, eps)
@@ -103,7 +122,8 @@ def test_sheetpile_heaves_within_20_percent_of_terzaghi(run_cli, tmp_path):
     assert above[2] > 1e-3, above
 
 
-def test_levee_first_yield_at_the_landside_toe(run_cli, tmp_path):
+@pytest.mark.xdist_group("levee_stage1")  # stage 1 is the shared run (fixture levee_stage1_coarse)
+def test_levee_first_yield_at_the_landside_toe(run_cli, tmp_path, levee_stage1_coarse):
     """configs/embankment.yaml at dx 0.02, shortened: stage 1 as shipped, stage 2 with k five times the
     shipped 3 cm/s and the piston five times as fast (Darcy's law makes the seepage's time scale 1 / k, and
     the drag of the river's flow on the riverside slope, (g / k) times its speed, keeps its size), 5.5 s
@@ -117,9 +137,7 @@ def test_levee_first_yield_at_the_landside_toe(run_cli, tmp_path):
     (the water's default sound speed, with eq 36 at the flow's 17.2 m/s and density diffusion 0.1 in
     either form, the first the defaults; 9x the steps, not run here) the same frame and particles yield first (docs/levee.md, "The sequence at the
     physical c_v"). Bound 3 dx: the acceptance."""
-    s1, s2 = tmp_path / "s1.h5", tmp_path / "s2.h5"
-    r = run_cli("--config", "configs/embankment.yaml", "--variant", "geostatic", "--set", "dx=0.02",
-                "--out", s1, "--no-progress")
+    (s1, r), s2 = levee_stage1_coarse, tmp_path / "s2.h5"
     assert r.returncode == 0, r.stderr
     r = run_cli("--config", "configs/embankment.yaml", "--set", "dx=0.02", "--set", "end_time=5.5",
                 "--set", "output.every=0.25", "--set", "wcsph.soil.permeability=0.15",
