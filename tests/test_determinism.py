@@ -170,3 +170,33 @@ def test_returned_reductions_leave_the_steps_as_they_were(tmp_path):
     10 steps of a collapsing column, of the consolidation column and of a column pushed by a piston (f32:
     the reductions pass through f64 and back exactly)."""
     assert "same" in _run_script(tmp_path / "returned.py", RETURN_SCRIPT)
+
+
+SERIAL_SCRIPT = r"""
+import numpy as np
+import taichi as ti
+
+ti.init(arch=ti.cpu, default_fp=ti.f64, cpu_max_num_threads=1, log_level=ti.WARN)
+from taichi_sph.linalg import ell_pcg
+from tests.test_ell_pcg import random_spd, sph_lattice_ppe
+
+for A, b in (sph_lattice_ppe((30, 30))[:2], random_spd()[:2]):
+    n = A.shape[0]
+    width = int(np.diff(A.indptr).max())
+    runs = []
+    for rows in (0, n):  # parallel loops, then serial ones (SERIAL_ROWS)
+        ell_pcg.SERIAL_ROWS = rows
+        solver = ell_pcg.EllPCG(n, width, 1e-10, 5000)
+        solver.load_csr(A.indptr, A.indices, A.data, b, np.zeros(n))
+        it, res, ok = solver.solve()
+        assert solver._serial == (rows == n) and ok
+        runs.append((it, res, solver.x.to_numpy()[:n]))
+    assert runs[0][:2] == runs[1][:2] and np.array_equal(runs[0][2], runs[1][2]), (runs[0][:2], runs[1][:2])
+print("same")
+"""
+
+
+def test_serial_small_systems_solve_as_one_thread(tmp_path):
+    """EllPCG's serial loops for small systems on the CPU (ell_pcg.SERIAL_ROWS) give the iterates, count and
+    residual of its parallel loops on one thread bit for bit (an SPH lattice PPE and a random SPD matrix)."""
+    assert "same" in _run_script(tmp_path / "serial.py", SERIAL_SCRIPT)

@@ -85,6 +85,13 @@ import taichi as ti
 MAX_RESTARTS = 3
 #: Jacobi-PCG iterations launched per read of the convergence state on CUDA (`batch="auto"`)
 BATCH_GPU = 8
+#: on the CPU, a system of at most this many rows runs its iterations' loops serially on the calling thread.
+#: Each parallel loop hands its work to Taichi's thread pool and waits for it, which costs more than the
+#: loop's own work for a small system: the permeameter at dx 5 mm (1,500 rows, 200 iterations a step)
+#: took 55 ms a step on 2 cores and 61 ms on one thread, 22 / 19 ms serial; at 6,000 rows 63 against 30 ms,
+#: at ~24,000 rows 176 against 120 ms (2-core AMD EPYC). The bound leaves larger systems to the threads on
+#: machines with more cores, where their share of the work is smaller.
+SERIAL_ROWS = 8192
 #: two-stage dot products: threads of the first stage (each sums every STAGE_THREADS-th row), and of the fold
 STAGE_THREADS = 1 << 16
 FOLD_THREADS = 256
@@ -151,6 +158,11 @@ class EllPCG:
         if reduction not in ("atomic", "two_stage"):
             raise ValueError(f"reduction must be 'atomic', 'two_stage' or 'auto', not {reduction!r}")
         self.reduction = reduction
+        from taichi.lang import impl
+
+        self._cpu = impl.current_cfg().arch == ti.cpu
+        #: this solve's systems are small enough for serial loops (SERIAL_ROWS; set by `solve`)
+        self._serial = False
         if batch == "auto":
             from taichi.lang import impl
 
@@ -347,22 +359,25 @@ class EllPCG:
         return ti.Vector([ti.cast(sums[0], ti.f64), ti.cast(sums[1], ti.f64)])
 
     @ti.kernel
-    def _k_iterate(self, jacobi: ti.template()) -> ti.f64:
+    def _k_iterate(self, jacobi: ti.template(), serial: ti.template()) -> ti.f64:
         """One PCG iteration: p = z + beta p, alpha = r.z / p.Ap, x += alpha p, r -= alpha Ap; with `jacobi`
         also z = D^-1 r, r.z and the next beta (a preconditioner of its own, as the multigrid V-cycle of
-        mg_pcg.py, computes them itself). Returns the recurrence |r|^2, or -1 on breakdown (p.Ap <= 0)."""
-        return self._iteration(jacobi, 1)
+        mg_pcg.py, computes them itself). Returns the recurrence |r|^2, or -1 on breakdown (p.Ap <= 0).
+        With `serial` its loops run on the calling thread (SERIAL_ROWS)."""
+        return self._iteration(jacobi, 1, serial)
 
     @ti.func
-    def _iteration(self, jacobi: ti.template(), live):
+    def _iteration(self, jacobi: ti.template(), live, serial: ti.template()):
         """`_k_iterate`'s body with Taichi's reductions; with live = 0 its loops are empty and it changes
-        nothing (a batched iteration after the stop)."""
+        nothing (a batched iteration after the stop); with `serial` its loops are not parallel."""
         n = self.n[None] * live
         zero = ti.cast(0, self.dtype)
         beta = self.beta[None]
+        ti.loop_config(serialize=serial)
         for i in range(n):
             self.p[i] = self.z[i] + beta * self.p[i]
         self.pap[None] = zero
+        ti.loop_config(serialize=serial)
         for i in range(n):
             self.pap[None] += self._ap_row(i)
         alpha = zero
@@ -371,6 +386,7 @@ class EllPCG:
         self.rr[None] = zero
         if ti.static(jacobi):
             self.rz_new[None] = zero
+        ti.loop_config(serialize=serial)
         for i in range(n):
             sums = self._update_row(i, alpha, jacobi)
             self.rr[None] += sums[0]
@@ -488,7 +504,7 @@ class EllPCG:
         return out
 
     @ti.kernel
-    def _k_iterate_gated(self, jacobi: ti.template(), threshold: ti.f64, limit: ti.i32):
+    def _k_iterate_gated(self, jacobi: ti.template(), threshold: ti.f64, limit: ti.i32, serial: ti.template()):
         """One iteration of a batch (`batch` > 1), launched without reading anything back: it runs while the
         gate is open (no stop yet, fewer than `limit` iterations made in this batch series) and closes the
         gate where the host loop of `solve` would stop (breakdown, a non-finite |r|^2, or |r|^2 <=
@@ -500,7 +516,7 @@ class EllPCG:
         if ti.static(self.reduction == "two_stage"):
             out = self._iteration_two_stage(jacobi, live)
         else:
-            out = self._iteration(jacobi, live)
+            out = self._iteration(jacobi, live, serial)
         if live == 1:
             g = self.gate[None]
             g[1] += 1.0
@@ -560,7 +576,7 @@ class EllPCG:
         self._k_gate_open()
         while True:
             for _ in range(min(self.batch, limit)):
-                self._k_iterate_gated(True, threshold, limit)
+                self._k_iterate_gated(True, threshold, limit, self._serial)
             stopped, made, _ = self._k_gate()
             if stopped or made >= limit:
                 return int(made)
@@ -569,7 +585,7 @@ class EllPCG:
         """`_k_iterate` or its two-stage form, as `reduction` says."""
         if self.reduction == "two_stage":
             return self._k_iterate_two_stage(jacobi)
-        return self._k_iterate(jacobi)
+        return self._k_iterate(jacobi, self._serial)
 
     # ------------------------------------------------------------------ host API
     def check_overflow(self) -> None:
@@ -589,6 +605,7 @@ class EllPCG:
             if not 0 <= n <= self.n_max:
                 raise ValueError(f"n = {n} is outside 0..{self.n_max}")
             self.n[None] = int(n)
+        self._serial = self._cpu and int(self.n[None]) <= SERIAL_ROWS
         if zero_mean:
             self._k_remove_mean(self.b)
         self._prepare()
