@@ -144,29 +144,24 @@ class EllPCG:
         self.tolerance = float(tolerance)
         self.max_iterations = int(max_iterations)
         self.dtype = fp = dtype if dtype is not None else _default_fp()
-        if layout == "auto":
-            from taichi.lang import impl
+        from taichi.lang import impl
 
-            layout = "column" if impl.current_cfg().arch == ti.cuda else "row"
+        arch = impl.current_cfg().arch
+        if layout == "auto":
+            layout = "column" if arch == ti.cuda else "row"
         if layout not in ("row", "column"):
             raise ValueError(f"layout must be 'row', 'column' or 'auto', not {layout!r}")
         self.layout = layout
         if reduction == "auto":
-            from taichi.lang import impl
-
-            reduction = "two_stage" if impl.current_cfg().arch == ti.cuda else "atomic"
+            reduction = "two_stage" if arch == ti.cuda else "atomic"
         if reduction not in ("atomic", "two_stage"):
             raise ValueError(f"reduction must be 'atomic', 'two_stage' or 'auto', not {reduction!r}")
         self.reduction = reduction
-        from taichi.lang import impl
-
-        self._cpu = impl.current_cfg().arch == ti.cpu
+        self._cpu = arch == ti.cpu
         #: this solve's systems are small enough for serial loops (SERIAL_ROWS; set by `solve`)
         self._serial = False
         if batch == "auto":
-            from taichi.lang import impl
-
-            batch = BATCH_GPU if impl.current_cfg().arch == ti.cuda else 1
+            batch = BATCH_GPU if arch == ti.cuda else 1
         if not isinstance(batch, int) or batch < 1:
             raise ValueError(f"batch must be a positive integer or 'auto', not {batch!r}")
         self.batch = batch
