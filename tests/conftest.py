@@ -55,15 +55,17 @@ def cli_env():
     return env
 
 
+def cli(*args, timeout=900, cwd=None):
+    """Run `taichi-sph ARGS...` in a subprocess from the repository root; returns CompletedProcess."""
+    cmd = [sys.executable, "-m", "taichi_sph.cli", *map(str, args)]
+    return subprocess.run(cmd, cwd=cwd or ROOT, env=cli_env(), capture_output=True, text=True, timeout=timeout,
+                          check=False)
+
+
 @pytest.fixture
 def run_cli():
-    """Run `taichi-sph ARGS...` in a subprocess from the repository root; returns CompletedProcess."""
-
-    def _run(*args, timeout=900, cwd=None):
-        cmd = [sys.executable, "-m", "taichi_sph.cli", *map(str, args)]
-        return subprocess.run(cmd, cwd=cwd or ROOT, env=cli_env(), capture_output=True, text=True, timeout=timeout)
-
-    return _run
+    """`cli` as a fixture."""
+    return cli
 
 
 @pytest.fixture(scope="session")
@@ -72,10 +74,7 @@ def soil_column_run(tmp_path_factory):
     rest (tests/test_soil.py) and stage 1 of the two-stage column (tests/test_levee.py), both marked
     xdist_group("soil_column") so that one worker runs it. Returns (path, CompletedProcess)."""
     out = tmp_path_factory.mktemp("soil_column") / "s1.h5"
-    cmd = [sys.executable, "-m", "taichi_sph.cli", "--config", "configs/soil_column.yaml", "--out", str(out),
-           "--no-progress"]
-    return out, subprocess.run(cmd, cwd=ROOT, env=cli_env(), capture_output=True, text=True, timeout=900,
-                                check=False)
+    return out, cli("--config", "configs/soil_column.yaml", "--out", out, "--no-progress")
 
 
 def surge_front_series(path, a):

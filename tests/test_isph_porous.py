@@ -1,16 +1,12 @@
 """Mode isph in porous ground: porosity from soil markers (eq 32), the eq 9 coefficients with the drag
 implicit in the projection, and the reduction to free water at eps = 1."""
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
 from taichi_sph.io.hdf5 import RunFile
 
-from .conftest import ROOT, cli_env
-
+from .conftest import cli
 
 G = 9.81
 
@@ -103,10 +99,7 @@ def freefall_coarse(tmp_path_factory):
     """configs/freefall.yaml, variant coarse, as shipped (2.5 s), run once: its run file and the CLI's
     CompletedProcess. The tests that read it are marked xdist_group("freefall_coarse")."""
     out = tmp_path_factory.mktemp("ff") / "ff.h5"
-    r = subprocess.run([sys.executable, "-m", "taichi_sph.cli", "--config", "configs/freefall.yaml", "--variant",
-                        "coarse", "--out", str(out), "--no-progress"],
-                       cwd=ROOT, env=cli_env(), capture_output=True, text=True, timeout=900, check=False)
-    return out, r
+    return out, cli("--config", "configs/freefall.yaml", "--variant", "coarse", "--out", out, "--no-progress")
 
 
 @pytest.mark.xdist_group("freefall_coarse")  # reads the free fall's run (fixture freefall_coarse)
@@ -216,10 +209,8 @@ def _permeameter_run(path, dt, *sets):
     from taichi_sph.isph.porosity import column_level
 
     extra = [a for s in sets for a in ("--set", s)]
-    r = subprocess.run([sys.executable, "-m", "taichi_sph.cli", "--config", "configs/permeameter.yaml",
-                        "--set", "dx=0.005", "--set", f"dt={dt}", "--set", "end_time=0.44",
-                        "--set", "output.every=0.01", *extra, "--out", str(path), "--no-progress"],
-                       cwd=ROOT, env=cli_env(), capture_output=True, text=True, timeout=900)
+    r = cli("--config", "configs/permeameter.yaml", "--set", "dx=0.005", "--set", f"dt={dt}", "--set", "end_time=0.44",
+            "--set", "output.every=0.01", *extra, "--out", path, "--no-progress")
     assert r.returncode == 0, r.stderr
     with RunFile(path) as rf:
         w = rf.kind == 0

@@ -3,9 +3,6 @@ landside toe yielding first, a dry levee wetting), heave behind the sheet pile o
 and the flow-net reference for that heave. Full runs: tools/seepage_failure.py, docs/levee.md and
 docs/sheetpile.md."""
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
@@ -13,7 +10,7 @@ from taichi_sph.io.hdf5 import RunFile
 from taichi_sph.wcsph.failure import yield_sequence
 from taichi_sph.wcsph.flownet import harr_prism_ratio, prism_ratio
 
-from .conftest import ROOT, cli_env
+from .conftest import cli
 
 SOIL = 2
 
@@ -49,10 +46,8 @@ def levee_stage1_coarse(tmp_path_factory):
     """configs/embankment.yaml, variant geostatic (stage 1) at dx 0.02, run once for the tests marked
     xdist_group("levee_stage1"): its run file and the CLI's CompletedProcess."""
     out = tmp_path_factory.mktemp("levee") / "s1.h5"
-    r = subprocess.run([sys.executable, "-m", "taichi_sph.cli", "--config", "configs/embankment.yaml", "--variant",
-                        "geostatic", "--set", "dx=0.02", "--out", str(out), "--no-progress"],
-                       cwd=ROOT, env=cli_env(), capture_output=True, text=True, timeout=900, check=False)
-    return out, r
+    return out, cli("--config", "configs/embankment.yaml", "--variant", "geostatic", "--set", "dx=0.02", "--out", out,
+                    "--no-progress")
 
 
 @pytest.mark.parametrize("dx", [0.01, pytest.param(0.02, marks=pytest.mark.xdist_group("levee_stage1"))])
