@@ -65,12 +65,14 @@ def brute_force(pos, in_grid, rows, radius):
     return out
 
 
-@pytest.mark.parametrize("dim, n", [(2, 3000), (3, 4000)])
-def test_neighbour_lists_match_brute_force(ti_cpu, dim, n):
+@pytest.mark.parametrize("dim, n, serial", [(2, 3000, False), (3, 4000, False), (2, 3000, True)])
+def test_neighbour_lists_match_brute_force(ti_cpu, dim, n, serial):
+    """`serial`: every loop of the grid on the calling thread (a solver's small scene on the CPU)."""
     capacity = n + 37
     lo, hi, pos, active, mask = make_case(dim, n, capacity, seed=dim)
     x, act, msk, ids = make_fields(dim, capacity, pos, active, mask)
-    grid = NeighbourGrid(capacity, dim, lo, hi, CELL, max_neighbours=400)
+    grid = NeighbourGrid(capacity, dim, lo, hi, CELL, max_neighbours=400, serial=serial)
+    assert grid.serial_loops == serial
     assert grid.ncell == tuple(int(np.ceil((hi[d] - lo[d]) / CELL)) for d in range(dim))
     assert grid.num_cells == int(np.prod(grid.ncell))
 

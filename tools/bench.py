@@ -4,7 +4,8 @@ Modes: isph_free (hydrostatic tank at rest), isph_porous (the seed's free fall i
 configs/freefall.yaml geometry, Smagorinsky on), wcsph (the dam break of configs/dambreak_wcsph.yaml,
 tank 4 x 3 m, column 1 x 2 m; in 3D 0.2 m wide), wcsph_soil (a hook: listed, skipped until that
 mode exists). Sizes S, M, L are about 10k, 50k and 200k water particles (dx chosen from the water
-volume); XL, about 1M, is for GPUs. Each case runs in its own process (one Taichi runtime per process), which gives:
+volume); XL, about 1M, is for GPUs; XS, about 2k, is a small 2D case on a laptop (and the scale of the test
+suite), where a step's loops run serially on the CPU (isph SERIAL_PARTICLES, wcsph SERIAL_BELOW). Each case runs in its own process (one Taichi runtime per process), which gives:
 
 - particle-steps per second (water particles x steps / wall seconds; MIPPS = millions of them),
 - time per phase (the solver's own timers) and PPE CG iterations per step (isph),
@@ -19,8 +20,11 @@ Writes docs/performance.json and the generated table into docs/performance.md be
 `<!-- bench:begin -->` and `<!-- bench:end -->` (the rest of that file is kept), machine named.
 
     python tools/bench.py --quick             # size S, 2D and 3D, every mode (a few minutes on 2 cores)
-    python tools/bench.py [--modes ...] [--dims 2 3] [--sizes S M L XL] [--arch cpu cuda] [--min-time 10]
+    python tools/bench.py [--modes ...] [--dims 2 3] [--sizes XS S M L XL] [--arch cpu cuda] [--min-time 10]
         [--no-jit]   # skip the cold / warm JIT runs of the smallest size
+    python tools/bench.py --sizes XS S --baseline CHECKOUT --out /tmp/perf.md
+        # each case also runs on the package of another checkout (e.g. a git worktree of the commit before
+        # a change), back to back with this one; the report gives the baseline's ms/step and the ratio
 """
 
 import argparse
@@ -37,7 +41,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-SIZES = {"S": 10_000, "M": 50_000, "L": 200_000, "XL": 1_000_000}
+SIZES = {"XS": 2_000, "S": 10_000, "M": 50_000, "L": 200_000, "XL": 1_000_000}
 BEGIN, END = "<!-- bench:begin -->", "<!-- bench:end -->"
 
 
@@ -226,12 +230,15 @@ def kernel_profile(steps: int, top: int) -> list:
              "share": v.total_time / total} for name, v in rows]
 
 
-def spawn(spec: dict, cache: Path) -> dict:
+def spawn(spec: dict, cache: Path, src: Path | None = None) -> dict:
+    """Run one case in a child process; `src`: import the package of that checkout instead of this one."""
     env = dict(os.environ, TAICHI_SPH_CACHE=str(cache), TI_LOG_LEVEL="error")
     if spec.get("kernel_profile"):
         env["TI_KERNEL_PROFILER"] = "1"
     with tempfile.NamedTemporaryFile(suffix=".json") as f:
         cmd = [sys.executable, __file__, "--child", json.dumps(spec), "--child-out", f.name]
+        if src is not None:
+            cmd += ["--child-src", str(src)]
         r = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
         if r.returncode != 0:
             tail = (r.stderr or r.stdout).strip().splitlines()[-1:] or ["?"]
@@ -265,6 +272,12 @@ def markdown(results, info) -> str:
         lines.append(head + f"| {r['precision']} | {r['dx']:g} | {r['water_particles']} | {r['mipps']:.3f} | "
                      f"{1e3 * r['seconds_per_step']:.1f} | {cg} | {r['cpu_over_wall']:.2f} | {jit} | "
                      f"{r['peak_memory_mb']:.0f} | {gpu_mem} | {ph} |")
+    based = [r for r in results if r.get("baseline_seconds_per_step")]
+    if based:
+        lines += ["", f"Against the baseline `{info.get('baseline')}`, each case run back to back with it: "
+                  + "; ".join(f"{r['mode']} {r['dim']}D {r['size']} {r['arch']} "
+                              f"{1e3 * r['baseline_seconds_per_step']:.1f} -> {1e3 * r['seconds_per_step']:.1f} ms/step "
+                              f"({r['baseline_seconds_per_step'] / r['seconds_per_step']:.2f}x)" for r in based) + "."]
     return "\n".join(lines)
 
 
@@ -325,12 +338,21 @@ def main(argv=None) -> int:
                     help="print each case's N offloaded tasks that took the most device time per step (Taichi's "
                          "kernel profiler; it slows the steps, so the throughput of such a run is not the "
                          "benchmark's)")
+    ap.add_argument("--baseline", type=Path, default=None, metavar="CHECKOUT",
+                    help="also run each case on the package of this checkout, back to back with this one (the "
+                         "timed run of the baseline first), and report its ms/step and the ratio")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--child-out", help=argparse.SUPPRESS)
+    ap.add_argument("--child-src", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
+        if args.child_src:  # before anything imports the package
+            sys.path.insert(0, str(Path(args.child_src).resolve()))
         Path(args.child_out).write_text(json.dumps(run_case(json.loads(args.child))))
         return 0
+    if args.baseline is not None and not (args.baseline / "taichi_sph" / "__init__.py").is_file():
+        print(f"error: --baseline {args.baseline}: no taichi_sph package there", file=sys.stderr)
+        return 2
     from taichi_sph.config.load import parse_overrides
 
     overrides = dict(parse_overrides(args.overrides))
@@ -356,13 +378,21 @@ def main(argv=None) -> int:
                             one = {**pspec, "min_time": 0.0, "max_steps": 1, "warmup": 0, "kernel_profile": 0}
                             with tempfile.TemporaryDirectory() as tmp:
                                 jit = [spawn(one, Path(tmp)) for _ in range(2)]
+                        base = None
+                        if args.baseline is not None:
+                            base = spawn(pspec, cache / "baseline", args.baseline)
                         r = spawn(pspec, cache)
+                        if base is not None and "error" not in base and "error" not in r:
+                            r["baseline_seconds_per_step"] = base["seconds_per_step"]
                         if jit is not None and not any("error" in j for j in (*jit, r)):
                             r["jit_cold_seconds"] = jit[0]["jit_seconds"]
                             r["jit_seconds"] = jit[1]["jit_seconds"]
                         results.append(r)
                         msg = r.get("error") or (f"{r['water_particles']} particles, {r['mipps']:.3f} M particle-steps/s, "
                                                  f"{1e3 * r['seconds_per_step']:.1f} ms/step")
+                        if r.get("baseline_seconds_per_step"):
+                            msg += (f" (baseline {1e3 * r['baseline_seconds_per_step']:.1f} ms/step, "
+                                    f"{r['baseline_seconds_per_step'] / r['seconds_per_step']:.2f}x)")
                         print(f"{mode} {ppe or ''} {dim}D {size} {arch}: {msg}", flush=True)
                         for row in r.get("kernel_profile", []):
                             print(f"    {row['ms_per_step']:9.3f} ms/step {row['launches_per_step']:6.2f} launches/step "
@@ -371,7 +401,8 @@ def main(argv=None) -> int:
 
     info = {"machine": machine(), "gpu": gpu_name() if "cuda" in args.arch else None, "taichi": ".".join(map(str, ti.__version__)),
             "threads": os.environ.get("TI_CPU_MAX_NUM_THREADS", os.cpu_count()), "load": load,
-            "date": time.strftime("%Y-%m-%d"), "args": " ".join(argv if argv is not None else sys.argv[1:])}
+            "date": time.strftime("%Y-%m-%d"), "args": " ".join(argv if argv is not None else sys.argv[1:]),
+            **({"baseline": str(args.baseline)} if args.baseline is not None else {})}
     write_report(Path(args.out), results, info, keep=args.keep)
     print(f"wrote {args.out}")
     return 0

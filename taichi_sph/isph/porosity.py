@@ -110,10 +110,12 @@ def lattice_table(dim: int, n: int = 96, eps_min: float = 0.05) -> tuple[np.ndar
 
 @ti.data_oriented
 class MarkerSet:
-    """Fixed soil markers in cell order, and the porosity kernel that reads them."""
+    """Fixed soil markers in cell order, and the porosity kernel that reads them. With `serial` (the
+    solver's small-scene flag, on the CPU only) the kernel's loop runs on the calling thread."""
 
-    def __init__(self, markers: dict, dim: int, lo, hi, support_radius: float):
+    def __init__(self, markers: dict, dim: int, lo, hi, support_radius: float, serial: bool = False):
         self.dim = dim
+        self.serial = bool(serial)
         self.m = m = len(markers["position"])
         self.re = support_radius
         self.h = 0.5 * support_radius
@@ -146,6 +148,7 @@ class MarkerSet:
         """eps_i (eq 32) and the local D50 for the first n particles with mask 1; eps = 1 elsewhere.
         reach_i is 1 where a marker of porosity below 1 lies within the support (the outer half of a face's
         ramp, where eq 32 still gives eps 1, included), else 0."""
+        ti.loop_config(serialize=self.serial)
         for i in range(n):
             e = 1.0
             dloc = 1.0

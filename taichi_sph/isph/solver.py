@@ -68,6 +68,14 @@ DRAG_CORRECTED = 5.0
 #: flags of a vertical wall particle in _k_wet: water within its support reaches its height (not more than
 #: 0.6 dx below it), and not all of that water hangs above it (some within 0.6 dx above it or lower)
 WET_REACHED, WET_NOT_HANGING = 2, 4
+#: on the CPU, a scene of at most this many particles (water, walls and all) runs every loop of the step
+#: serially on the calling thread (`self.serial`), as EllPCG does below its SERIAL_ROWS: a parallel loop
+#: hands its work to Taichi's thread pool and waits for it, which costs more than a small loop's own work.
+#: Wall ms per step on 2 cores (AMD EPYC), parallel / serial: permeameter dx 5 mm (2.0k particles)
+#: 14.0-15.2 / 9.1-9.2, coarse free fall (3D, 7.2k) 16-19 / 11-12; the two meet above the bound: porous
+#: dam break dx 3.5 mm (2D, 10.4k) 102-121 / 112-123, free fall dx 1.5 cm (3D, 12.3k) 18-26 / 21-25
+#: (docs/performance.md, "Small scenes run serially")
+SERIAL_PARTICLES = 8192
 _GRAD = {"corrected": GRAD_CORRECTED, "difference": GRAD_DIFFERENCE, "symmetric": GRAD_SYMMETRIC}
 
 
@@ -148,6 +156,8 @@ class ISPHSolver(SolverCommon):
         self.period = scene.periods()
         self.periodic = sw.periodic
         n = self.n
+        #: the step's loops run serially on the calling thread (SERIAL_PARTICLES; never on a GPU)
+        self.serial = on_cpu() and n <= SERIAL_PARTICLES
         self.max_nb = cfg.max_neighbours()
         self.ppe_widenings = 0  # times the ELL PPE matrix was widened after a row overflow
         vec = ti.types.vector(dim, float)
@@ -234,11 +244,12 @@ class ISPHSolver(SolverCommon):
         self.wall_origin = self.motion.origin
         self.particle_fields += self.motion.fields()
 
-        self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.re, self.max_nb, period=self.period)
+        self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.re, self.max_nb, period=self.period,
+                                  serial=self.serial)
         self.wall_pressure = walls.WallPressure(self, n)
         self.markers = None
         if self.porous:
-            self.markers = _porosity.MarkerSet(scene.markers, dim, scene.lo, scene.hi, self.re)
+            self.markers = _porosity.MarkerSet(scene.markers, dim, scene.lo, scene.hi, self.re, serial=self.serial)
             eps_tab, k_tab, n_tab = _porosity.lattice_table(dim)
             self.ksum_eps0 = float(eps_tab[0])
             self.ksum_deps = float(eps_tab[1] - eps_tab[0])
@@ -326,6 +337,7 @@ class ISPHSolver(SolverCommon):
         Counting it would fill the missing air above surface particles along a wall, most of all in a
         corner where two walls rise above the water, so that those particles are not found free.
         Floors, ceilings and obstacle tops (|n . up| >= 1/2) are always wet."""
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.kind[i] == WALL:
                 w = 1
@@ -334,6 +346,7 @@ class ISPHSolver(SolverCommon):
                         w = 0
                 self.wet[i] = w
         if ti.static(self.dry_walls):
+            ti.loop_config(serialize=self.serial)
             for i in range(self.n):
                 if self.solve_mask[i] == 1:
                     xi = self.x[i]
@@ -352,6 +365,7 @@ class ISPHSolver(SolverCommon):
                                 ti.atomic_or(self.wet[j], WET_REACHED)
                             if rests or dz <= 0.6 * self.dx:
                                 ti.atomic_or(self.wet[j], WET_NOT_HANGING)
+            ti.loop_config(serialize=self.serial)
             for i in range(self.n):
                 if self.kind[i] == WALL and self.wet[i] != 1:
                     self.wet[i] = 1 if self.wet[i] == WET_REACHED | WET_NOT_HANGING else 0
@@ -400,6 +414,7 @@ class ISPHSolver(SolverCommon):
     @ti.kernel
     def _k_density(self):
         """<rho_i> (eq 27), free-surface flag (eq 34) and the kernel-gradient correction L_i."""
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 xi = self.x[i]
@@ -519,6 +534,7 @@ class ISPHSolver(SolverCommon):
 
     @ti.kernel
     def _k_body_init(self):
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             self.body[i] = i
             self.body_free[i] = 0
@@ -531,6 +547,7 @@ class ISPHSolver(SolverCommon):
 
     @ti.kernel
     def _k_body_sweep(self):
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 lowest = self.body[i]
@@ -544,6 +561,7 @@ class ISPHSolver(SolverCommon):
     def _k_body_close(self):
         self.closed_bodies[None] = 0
         self.any_free[None] = 0
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 b = self.body[i]
@@ -558,6 +576,7 @@ class ISPHSolver(SolverCommon):
                             self.body_open[b] = 1
                 ti.atomic_min(self.body_pick[b], ti.i64(count) * ti.i64(self.n) + ti.i64(i))
                 ti.atomic_add(self.body_size[b], 1)
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1 and self.any_free[None] == 1:
                 b = self.body[i]
@@ -592,6 +611,7 @@ class ISPHSolver(SolverCommon):
         0.25 ms). A candidate with at most dim water neighbours is free whatever its cone: a drop of a few
         particles hanging in a corner of walls, which block its cone, would otherwise have no Dirichlet row
         (a singular block of the PPE, on which CG diverged)."""
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1 and self.isolated[i] == 0:
                 xi = self.x[i]
@@ -682,6 +702,7 @@ class ISPHSolver(SolverCommon):
     @ti.kernel
     def _k_remember_air(self):
         """The step's free-surface flags, where the next step's cone test looks for air (air_last)."""
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             self.air_last[i] = self.free[i]
 
@@ -698,6 +719,7 @@ class ISPHSolver(SolverCommon):
         ground's depth (+47 % at the bottom of 10 cm of sand). Taking the packing at t = 0 as the rest
         state for these particles (only they, and clamped to [0.8, 1.25]) keeps the stabilisation
         acting on compression and dilation since the start, as for free water."""
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1 and self.free[i] == 0:
                 near = self.eps[i] < 1.0
@@ -712,6 +734,7 @@ class ISPHSolver(SolverCommon):
     @ti.kernel
     def _k_eddy_viscosity(self):
         """Smagorinsky eddy viscosity nu_T = (Cs Delta)^2 |S| (eq 3), S from a corrected eq 12 gradient."""
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 xi = self.x[i]
@@ -745,6 +768,7 @@ class ISPHSolver(SolverCommon):
         (vD + c (g / eps + nu_E lap vD) - c grad P / rho_bar) / D. Viscous term by eq 22. With
         eps = 1: Cr = 1, a = b = 0, D = 1 (plain Navier-Stokes)."""
         dt = self.dt[None]
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 xi = self.x[i]
@@ -817,6 +841,7 @@ class ISPHSolver(SolverCommon):
         dirichlet_diag = self.dirichlet_scale * dt / self.rho_w
         self.triplets[None] = 0
         self.dirichlet_rows[None] = 0
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.kind[i] == WATER:
                 ri = self.row[i]
@@ -903,6 +928,7 @@ class ISPHSolver(SolverCommon):
         ground"). Air advances one support per pass. Returns how many were freed (the PPE is then solved
         again). Not applied inside the ground (eps_i < 1): near a plug's exit face the pore pressure is
         near zero, and freeing its noise put Dirichlet rows into the plug."""
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             self.air_entry_now[i] = 0
             if self.solve_mask[i] == 1 and self.free[i] == 0 and self.candidate[i] == 1 and self.eps[i] >= 1.0:
@@ -912,6 +938,7 @@ class ISPHSolver(SolverCommon):
                         if self.kind[j] == WATER and self.free[j] == 1:
                             self.air_entry_now[i] = 1
         n_new = 0
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.air_entry_now[i] == 1:
                 self.free[i] = 1
@@ -955,6 +982,7 @@ class ISPHSolver(SolverCommon):
 
     @ti.kernel
     def _k_scatter_pressure(self, psol: ti.template()):
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.kind[i] == WATER:
                 pi = ti.cast(psol[self.row[i]], float)  # the PPE may solve in f64 (ppe_precision)
@@ -965,6 +993,7 @@ class ISPHSolver(SolverCommon):
 
     @ti.kernel
     def _k_gather_pressure(self, psol: ti.template()):
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.kind[i] == WATER:
                 psol[self.row[i]] = ti.cast(self.p[i], psol.dtype)
@@ -974,6 +1003,7 @@ class ISPHSolver(SolverCommon):
         """grad P of each water particle that has a wall neighbour, from its water neighbours only (eq 12
         difference form, corrected by their own moment matrix where it is invertible): what the wall
         pressure takes along the wall's face."""
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 xi = self.x[i]
@@ -1032,6 +1062,7 @@ class ISPHSolver(SolverCommon):
         leaving a splash) hung in the air (docs/isph.md, "Gravity on every particle"). With the
         kernel-gradient correction (L_i = M_i^-1) the operator is exact for the linear hydrostatic P, so
         water at rest still gets v = 0 to round-off wherever L_i exists."""
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 xi = self.x[i]
@@ -1085,6 +1116,7 @@ class ISPHSolver(SolverCommon):
         and the wall's first layer within one step. The wall surface lies dx / 2 beyond the first wall
         layer along the wall particle's normal."""
         self.collisions[None] = 0
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 xi = self.x[i]
@@ -1118,6 +1150,7 @@ class ISPHSolver(SolverCommon):
                         vnew -= (1.0 + self.restitution) * vn * n_wall
                         ti.atomic_add(self.collisions[None], 1)
                 self.vtmp[i] = vnew
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 self.v[i] = self.vtmp[i]
@@ -1128,6 +1161,7 @@ class ISPHSolver(SolverCommon):
         dr = -A h |u| dt grad C (grad C with Lind's anti-pairing term), with its component along the
         surface normal n = -grad C / |grad C| removed for particles within the support of a free-surface
         particle, and capped at shifting_max."""
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 dt = self.dt[None]
@@ -1165,6 +1199,7 @@ class ISPHSolver(SolverCommon):
         bad = 0.0
         first_bad = 2.0e9
         nfree = 0.0
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 u = self.v[i] / self.eps[i]

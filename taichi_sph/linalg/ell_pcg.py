@@ -293,14 +293,16 @@ class EllPCG:
 
     # ------------------------------------------------------------------ CG kernels
     @ti.kernel
-    def _k_residual(self) -> ti.types.vector(2, ti.f64):
-        """r = b - A x, z = M^-1 r, beta = 0 (p = z next); returns (|b|^2, |r|^2)."""
+    def _k_residual(self, serial: ti.template()) -> ti.types.vector(2, ti.f64):
+        """r = b - A x, z = M^-1 r, beta = 0 (p = z next); returns (|b|^2, |r|^2). With `serial` the loop
+        runs on the calling thread (SERIAL_ROWS)."""
         n = self.n[None]
         zero = ti.cast(0, self.dtype)
         one = ti.cast(1, self.dtype)
         self.bb[None] = zero
         self.rr[None] = zero
         self.rz[None] = zero
+        ti.loop_config(serialize=serial)
         for i in range(n):
             d = self.diag[i]
             inv = one
@@ -559,7 +561,7 @@ class EllPCG:
         """r = b - A x, z = M^-1 r, next direction p = z; returns (|b|^2, |r|^2)."""
         if self.reduction == "two_stage":
             return self._k_residual_two_stage(True)
-        return self._k_residual()
+        return self._k_residual(self._serial)
 
     def _iterate(self) -> float:
         """One PCG iteration; returns the recurrence |r|^2, or -1 on breakdown."""

@@ -10,7 +10,8 @@ box and returns their indices.
 On CPU the scan and the scatter run serially (``ti.loop_config(serialize=True)``): within a cell the
 particles keep ascending original index, so `perm` is deterministic. On GPU the scatter is atomic and
 the order inside a cell may vary from run to run. The scan over the cells is serial on the CPU and
-blocked on GPUs (scan.py).
+blocked on GPUs (scan.py). A grid made with `serial=True` (a solver's small scene on the CPU) runs all its
+loops serially: Taichi's thread pool costs more than a few thousand particles' work.
 
 `sort()` only computes `perm`; `reorder()` applies it to any per-particle field. After sorting and
 reordering positions, `build_neighbour_lists()` writes an explicit neighbour list per particle by
@@ -59,7 +60,7 @@ class NeighbourGrid:
     """Cell grid, counting sort and explicit neighbour lists for up to `capacity` particles."""
 
     def __init__(self, capacity: int, dim: int, lo, hi, cell_size: float, max_neighbours: int, period=None,
-                 grouped: bool = False):
+                 grouped: bool = False, serial: bool = False):
         if dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, not {dim}")
         lo = np.asarray(lo, dtype=float).reshape(-1).copy()
@@ -99,6 +100,9 @@ class NeighbourGrid:
         self._lo = [float(v) for v in lo]
         self._hi = [float(v) for v in hi]
         self._serial = on_cpu()
+        #: every loop runs on the calling thread (the solver's flag for a small scene on the CPU); else only
+        #: the scatter does, on the CPU (above)
+        self.serial_loops = bool(serial) and self._serial
 
         self.perm = ti.field(ti.i32, self.capacity)
         self.cell_start = ti.field(ti.i32, self.num_cells + 1)
@@ -127,9 +131,11 @@ class NeighbourGrid:
     # ------------------------------------------------------------------ sort
     @ti.kernel
     def _bin(self, x: ti.template(), active: ti.template(), n: ti.i32) -> ti.i32:
+        ti.loop_config(serialize=self.serial_loops)
         for c in range(self.num_cells + 1):
             self._count[c] = 0
         left = 0
+        ti.loop_config(serialize=self.serial_loops)
         for i in range(n):
             c = self.num_cells
             self._left[i] = ti.i8(0)
@@ -195,6 +201,7 @@ class NeighbourGrid:
     # --------------------------------------------------------------- reorder
     @ti.kernel
     def _gather(self, src: ti.template(), tmp: ti.template(), n: ti.i32):
+        ti.loop_config(serialize=self.serial_loops)
         for k in range(n):
             p = self.perm[k]
             if ti.static(len(src.shape) == 1):
@@ -202,6 +209,7 @@ class NeighbourGrid:
             else:
                 for j in range(src.shape[1]):
                     tmp[k, j] = src[p, j]
+        ti.loop_config(serialize=self.serial_loops)
         for k in range(n):
             if ti.static(len(src.shape) == 1):
                 src[k] = tmp[k]
@@ -254,6 +262,7 @@ class NeighbourGrid:
         self._ovf_max[None] = 0
         r2max = radius * radius
         overflow = 0
+        ti.loop_config(serialize=self.serial_loops)
         for i in range(n):
             cnt = 0
             s0 = 0
@@ -325,6 +334,7 @@ class NeighbourGrid:
     @ti.kernel
     def _find_overflow(self, n: ti.i32):
         self._ovf_index[None] = n
+        ti.loop_config(serialize=self.serial_loops)
         for i in range(n):
             if self._raw_count[i] == self._ovf_max[None]:
                 ti.atomic_min(self._ovf_index[None], i)
@@ -380,6 +390,7 @@ class NeighbourGrid:
 
     @ti.kernel
     def _group_rows(self, group: ti.template(), n: ti.i32):
+        ti.loop_config(serialize=self.serial_loops)
         for i in range(n):
             cnt = self.nbr_count[i]
             grouped = True
@@ -427,6 +438,7 @@ class NeighbourGrid:
     @ti.kernel
     def _max_count(self, n: ti.i32) -> ti.i32:
         m = 0
+        ti.loop_config(serialize=self.serial_loops)
         for i in range(n):
             ti.atomic_max(m, self.nbr_count[i])
         return m

@@ -14,9 +14,10 @@ from ..kinds import WALL
 
 class SolverCommon:
     """Mixin of ISPHSolver and WCSPHSolver. Expects `cfg`, `grid` (sph.grid.NeighbourGrid), `x`, `active`,
-    `ids`, `n`, `g_abs`, `particle_fields` (every per-particle field, reordered together), `timers` (dict of
-    seconds per phase), `removed_total`, `step_count` and `time`. Gives the defaults of the solver contract
-    (contract.Solver) that a mode may override."""
+    `ids`, `n`, `serial` (the loops run serially: a small scene on the CPU), `g_abs`, `particle_fields`
+    (every per-particle field, reordered together), `timers` (dict of seconds per phase), `removed_total`,
+    `step_count` and `time`. Gives the defaults of the solver contract (contract.Solver) that a mode may
+    override."""
 
     #: extra run-file attributes (none by default)
     run_attrs = MappingProxyType({})
@@ -58,6 +59,7 @@ class SolverCommon:
     def _k_guard_pack(self, out: ti.types.ndarray(dtype=ti.f64, ndim=2), rho: ti.template()):
         """Row ids[i] of `out`: x_i, the density the guard checks (rho_w at wall particles), 1 where x, v, p
         and rho are all finite, active, p_i."""
+        ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             k = self.ids[i]
             for d in ti.static(range(self.dim)):

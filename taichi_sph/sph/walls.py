@@ -93,7 +93,7 @@ def wall_mirror_solve(s, m_wall, along_equilibrium):
 class WallPressure:
     """Pressure of the wall particles of solver `fl`, P_w = sum_f W_wf P_w(f) / sum_f W_wf over the fluid
     particles f that see wall particle w (Adami et al. 2012), P_w(f) the value f sees there; 0 where no
-    fluid particle sees the wall. `fl` holds the particle store (n, kind, p, grid) and two ti.funcs:
+    fluid particle sees the wall. `fl` holds the particle store (n, kind, p, grid, serial) and two ti.funcs:
     `_wall_source(i)`, whether particle i takes part, and `_wall_pressure_seen(i, j)`, the pair's kernel
     weight and the pressure i sees at wall particle j (weight 0 leaves the pair out)."""
 
@@ -106,10 +106,12 @@ class WallPressure:
     def update(self):
         """Writes fl.p of every wall particle."""
         fl = self.fl
+        ti.loop_config(serialize=fl.serial)
         for i in range(fl.n):
             if fl.kind[i] == WALL:
                 self.num[i] = 0.0
                 self.den[i] = 0.0
+        ti.loop_config(serialize=fl.serial)
         for i in range(fl.n):
             if fl._wall_source(i):
                 for k in range(fl.grid.nbr_count[i]):
@@ -119,6 +121,7 @@ class WallPressure:
                         if wij > 0.0:
                             ti.atomic_add(self.num[j], wij * pw)
                             ti.atomic_add(self.den[j], wij)
+        ti.loop_config(serialize=fl.serial)
         for i in range(fl.n):
             if fl.kind[i] == WALL:
                 pw = 0.0

@@ -302,7 +302,7 @@ class WCSPHSolver(SolverCommon):
         # grid's grouped build): the fluid's pair pass walks walls and fluid, the soil's stress soil and walls, the
         # drag passes the other set, each its own range of the list
         self.grid = NeighbourGrid(n, dim, scene.lo, scene.hi, self.cell, self.max_nb, period=self.period,
-                                  grouped=self.has_soil)
+                                  grouped=self.has_soil, serial=self.serial)
         self.wall_pressure = walls.WallPressure(self, n)
         self.r_list = 0.0  # list radius at the last build
         self.hmax = self.h0
