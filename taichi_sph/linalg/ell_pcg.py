@@ -45,7 +45,10 @@ measures both.
 Solver: preconditioned CG (Hestenes-Stiefel) with M = diag(A), starting from the x already in the
 field. Each iteration is one kernel launch (p update, matvec with the p.Ap reduction, x/r/z update
 with the r.r and r.z reductions) that returns one scalar, |r|^2, to the host; no vector leaves the
-device. When the recurrence says |r| / |b| <= tolerance, the true residual b - A x is computed; if it
+device. A small system on the CPU (SERIAL_ROWS) runs all its iterations in one launch on the calling
+thread, which stops where the host loop would: launching costs more than such an iteration's work. Its
+dot products round differently from the loops launched one by one (x within ~5e-13 of |x| on a 900-row
+PPE, the same iteration count, tests/test_determinism.py), and it is deterministic. When the recurrence says |r| / |b| <= tolerance, the true residual b - A x is computed; if it
 is above the tolerance (round-off drift, f32), CG restarts from the true residual, at most
 MAX_RESTARTS times, within `max_iterations` iterations in all. A zero right-hand side gives x = 0.
 A matrix whose null space is the constants (a PPE without any Dirichlet row: a closed or periodic box
@@ -85,12 +88,14 @@ import taichi as ti
 MAX_RESTARTS = 3
 #: Jacobi-PCG iterations launched per read of the convergence state on CUDA (`batch="auto"`)
 BATCH_GPU = 8
-#: on the CPU, a system of at most this many rows runs its iterations' loops serially on the calling thread.
-#: Each parallel loop hands its work to Taichi's thread pool and waits for it, which costs more than the
-#: loop's own work for a small system: the permeameter at dx 5 mm (1,500 rows, 200 iterations a step)
-#: took 55 ms a step on 2 cores and 61 ms on one thread, 22 / 19 ms serial; at 6,000 rows 63 against 30 ms,
-#: at ~24,000 rows 176 against 120 ms (2-core AMD EPYC). The bound leaves larger systems to the threads on
-#: machines with more cores, where their share of the work is smaller.
+#: on the CPU, a system of at most this many rows runs its Jacobi-PCG iterations serially on the calling
+#: thread, all of them in one launch (`_k_iterate_serial`). Each parallel loop hands its work to Taichi's
+#: thread pool and waits for it, which costs more than the loop's own work for a small system: the
+#: permeameter at dx 5 mm (1,500 rows, 200 iterations a step) took 55 ms a step on 2 cores and 61 ms on one
+#: thread, 22 / 19 ms with serial loops; at 6,000 rows 63 against 30 ms, at ~24,000 rows 176 against 120 ms
+#: (2-core AMD EPYC). A launch per iteration then still cost about as much as its work: one launch for the
+#: whole solve took the same step from 12-14 to 6-8 ms (docs/performance.md). The bound leaves larger
+#: systems to the threads on machines with more cores, where their share of the work is smaller.
 SERIAL_ROWS = 8192
 #: two-stage dot products: threads of the first stage (each sums every STAGE_THREADS-th row), and of the fold
 STAGE_THREADS = 1 << 16
@@ -523,6 +528,21 @@ class EllPCG:
             self.gate[None] = g
 
     @ti.kernel
+    def _k_iterate_serial(self, threshold: ti.f64, limit: ti.i32) -> ti.types.vector(2, ti.f64):
+        """Jacobi-PCG iterations in one launch on the calling thread (a small system on the CPU,
+        SERIAL_ROWS), until the recurrence stops where the host loop of `solve` would (breakdown, a
+        non-finite |r|^2, or |r|^2 <= threshold) or `limit` iterations; returns (iterations, last |r|^2).
+        The same iterates as one launch per iteration, without a launch's cost per iteration."""
+        made = 0
+        out = ti.cast(0.0, ti.f64)
+        while made < limit:
+            out = self._iteration(True, 1, True)
+            made += 1
+            if not (out >= 0.0 and out > threshold):
+                break
+        return ti.Vector([ti.cast(made, ti.f64), out])
+
+    @ti.kernel
     def _k_gate_open(self):
         self.gate[None] = ti.Vector([0.0, 0.0, 0.0])
 
@@ -615,11 +635,15 @@ class EllPCG:
         threshold = self.tolerance**2 * bb
         iterations = 0
         restarts = 0
-        batched = self.batch > 1 and type(self)._iterate is EllPCG._iterate
+        jacobi = type(self)._iterate is EllPCG._iterate  # not a subclass with its own preconditioner
+        looped = jacobi and self._serial and self.reduction == "atomic"
+        batched = not looped and jacobi and self.batch > 1
         while math.isfinite(rr) and rr > threshold and iterations < self.max_iterations:
-            if batched:
+            if looped:
+                iterations += int(self._k_iterate_serial(threshold, self.max_iterations - iterations)[0])
+            elif batched:
                 iterations += self._iterate_batched(threshold, self.max_iterations - iterations)
-            while not batched and iterations < self.max_iterations:
+            while not (looped or batched) and iterations < self.max_iterations:
                 rr_rec = self._iterate()
                 iterations += 1
                 if not rr_rec >= 0.0 or rr_rec <= threshold:  # breakdown, non-finite or converged
