@@ -155,8 +155,9 @@ print(it, res, ok, np.linalg.norm(x - ref) / np.linalg.norm(ref))
 
 def test_gpu_paths_are_chosen_on_cuda():
     """On CUDA the GPU forms are the ones compiled (docs/performance.md, "GPU"): no scene runs its loops
-    serially, the prefix sums are blocked, the PPE's dot products are summed in two stages and its
-    Jacobi-PCG iterations launched in batches; and a short step of each mode runs with them."""
+    serially (the step's, the grid's), the prefix sums are blocked, the PPE's dot products are summed in
+    two stages and its Jacobi-PCG iterations launched in batches; and a short step of each mode runs with
+    them."""
     code = """
 import taichi as ti
 ti.init(arch=ti.cuda, default_fp=ti.f32, log_level=ti.ERROR)
@@ -168,11 +169,12 @@ base = {"dim": 2, "dx": 0.01, "end_time": 1.0, "tank": {"size": [0.3, 0.2]},
         "water": [{"min": [0, 0], "max": [0.1, 0.15]}]}
 cfg = load_config(data=dict(base, mode="wcsph_biot", dt="auto"))
 w = make_solver(cfg, build_scene(cfg))
-assert not w.serial and w.grid._scan.blocked and w._moving_scan.blocked
+assert not w.serial and not w.grid.serial_loops and w.grid._scan.blocked and w._moving_scan.blocked
 w.initial_diagnostics()
 w.step(w.propose_dt()[0])
 cfg = load_config(data=dict(base, mode="isph", dt=0.002, isph={"ppe": {"type": "mg_pcg"}}))
 s = make_solver(cfg, build_scene(cfg))
+assert not s.serial and not s.grid.serial_loops
 assert s.grid._scan.blocked and s._row_scan.blocked and s.ppe._cell_scan.blocked
 assert s.ppe.reduction == "two_stage" and s.ppe.n_par == s.ppe.m - 1
 from taichi_sph.linalg.ell_pcg import BATCH_GPU, EllPCG
