@@ -4,8 +4,10 @@ Modes: isph_free (hydrostatic tank at rest), isph_porous (the seed's free fall i
 configs/freefall.yaml geometry, Smagorinsky on), wcsph (the dam break of configs/dambreak_wcsph.yaml,
 tank 4 x 3 m, column 1 x 2 m; in 3D 0.2 m wide), wcsph_soil (a hook: listed, skipped until that
 mode exists). Sizes S, M, L are about 10k, 50k and 200k water particles (dx chosen from the water
-volume); XL, about 1M, is for GPUs; XS, about 2k, is a small 2D case on a laptop (and the scale of the test
-suite), where a step's loops run serially on the CPU (isph SERIAL_PARTICLES, wcsph SERIAL_BELOW). Each case runs in its own process (one Taichi runtime per process), which gives:
+volume); XL, about 1M, is for GPUs; XS, about 2k, is a small case on a laptop (and the scale of the test
+suite), where a step's loops run serially on the CPU when the scene, walls included, is small enough (isph
+SERIAL_PARTICLES, wcsph SERIAL_BELOW). Each case runs in its own process (one Taichi runtime per
+process), which gives:
 
 - particle-steps per second (water particles x steps / wall seconds; MIPPS = millions of them),
 - time per phase (the solver's own timers) and PPE CG iterations per step (isph),
@@ -22,7 +24,7 @@ Writes docs/performance.json and the generated table into docs/performance.md be
     python tools/bench.py --quick             # size S, 2D and 3D, every mode (a few minutes on 2 cores)
     python tools/bench.py [--modes ...] [--dims 2 3] [--sizes XS S M L XL] [--arch cpu cuda] [--min-time 10]
         [--no-jit]   # skip the cold / warm JIT runs of the smallest size
-    python tools/bench.py --sizes XS S --baseline CHECKOUT --out /tmp/perf.md
+    python tools/bench.py --sizes XS S --baseline CHECKOUT --out compare.md
         # each case also runs on the package of another checkout (e.g. a git worktree of the commit before
         # a change), back to back with this one; the report gives the baseline's ms/step and the ratio
 """

@@ -48,9 +48,10 @@ with the r.r and r.z reductions) that returns one scalar, |r|^2, to the host; no
 device. A small system on the CPU (SERIAL_ROWS) runs all its iterations in one launch on the calling
 thread, which stops where the host loop would: launching costs more than such an iteration's work. Its
 dot products round differently from the loops launched one by one (x within ~5e-13 of |x| on a 900-row
-PPE, the same iteration count, tests/test_determinism.py), and it is deterministic. When the recurrence says |r| / |b| <= tolerance, the true residual b - A x is computed; if it
-is above the tolerance (round-off drift, f32), CG restarts from the true residual, at most
-MAX_RESTARTS times, within `max_iterations` iterations in all. A zero right-hand side gives x = 0.
+PPE, the same iteration count, tests/test_determinism.py), and it is deterministic. When the recurrence
+says |r| / |b| <= tolerance, the true residual b - A x is computed; if it is above the tolerance
+(round-off drift, f32), CG restarts from the true residual, at most MAX_RESTARTS times, within
+`max_iterations` iterations in all. A zero right-hand side gives x = 0.
 A matrix whose null space is the constants (a PPE without any Dirichlet row: a closed or periodic box
 full of water) is solved with `zero_mean=True`: b is projected onto the range of A (its mean
 removed), CG converges in that range, and the zero-mean solution is returned.
@@ -532,7 +533,8 @@ class EllPCG:
         """Jacobi-PCG iterations in one launch on the calling thread (a small system on the CPU,
         SERIAL_ROWS), until the recurrence stops where the host loop of `solve` would (breakdown, a
         non-finite |r|^2, or |r|^2 <= threshold) or `limit` iterations; returns (iterations, last |r|^2).
-        The same iterates as one launch per iteration, without a launch's cost per iteration."""
+        The iterations of one launch each, without a launch's cost per iteration; their dot products round
+        differently (the module's docstring)."""
         made = 0
         out = ti.cast(0.0, ti.f64)
         while made < limit:
