@@ -131,8 +131,10 @@ class EllPCG:
     docs/performance.md "GPU"); "auto" picks "column" on CUDA and "row" elsewhere.
 
     batch: Jacobi-PCG iterations launched per read of the convergence state (module docstring); "auto":
-    BATCH_GPU on CUDA, 1 elsewhere (the CPU's launches are synchronous: nothing to gain). A subclass with its
-    own preconditioner (mg_pcg.py) iterates one launch per read.
+    BATCH_GPU on CUDA, 1 elsewhere (the CPU's launches are synchronous: nothing to gain), and on the CPU a
+    system of at most SERIAL_ROWS rows runs all its iterations in one launch; a number is taken as given
+    (1: one launch and one read per iteration, as tests/test_ell_pcg.py compares the batches with). A
+    subclass with its own preconditioner (mg_pcg.py) iterates one launch per read.
 
     reduction: how an iteration's dot products are summed: "atomic" (Taichi's own reduction), "two_stage"
     (partial sums in slots, folded without atomics; see the module's docstring), or "auto": "two_stage"
@@ -166,6 +168,9 @@ class EllPCG:
         self._cpu = arch == ti.cpu
         #: this solve's systems are small enough for serial loops (SERIAL_ROWS; set by `solve`)
         self._serial = False
+        #: the batch as given: with "auto" a small system on the CPU runs its iterations in one launch
+        #: (`_k_iterate_serial`); a batch given as a number is taken as it is
+        self.batch_setting = batch
         if batch == "auto":
             batch = BATCH_GPU if arch == ti.cuda else 1
         if not isinstance(batch, int) or batch < 1:
@@ -240,7 +245,7 @@ class EllPCG:
         """A new solver with `max_nb` slots per row and the same settings, its x copied from this one
         (warm start); the matrix must be filled again. Its kernels compile anew (once)."""
         other = EllPCG(self.n_max, max_nb, self.tolerance, self.max_iterations, self.dtype, self.layout,
-                       self.reduction, self.batch)
+                       self.reduction, self.batch_setting)
         other.x.copy_from(self.x)
         other.n[None] = self.n[None]
         return other
@@ -638,8 +643,8 @@ class EllPCG:
         iterations = 0
         restarts = 0
         jacobi = type(self)._iterate is EllPCG._iterate  # not a subclass with its own preconditioner
-        looped = jacobi and self._serial and self.reduction == "atomic"
-        batched = not looped and jacobi and self.batch > 1
+        looped = jacobi and self._serial and self.reduction == "atomic" and self.batch_setting == "auto"
+        batched = jacobi and self.batch > 1
         while math.isfinite(rr) and rr > threshold and iterations < self.max_iterations:
             if looped:
                 iterations += int(self._k_iterate_serial(threshold, self.max_iterations - iterations)[0])
