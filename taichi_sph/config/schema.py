@@ -70,7 +70,9 @@ class Fluid(Strict):
     density: PosFloat = 1000.0
     #: kinematic viscosity nu_w (m^2/s)
     viscosity: NonNegFloat = 1.0e-6
-    #: sub-particle turbulence: Smagorinsky eddy viscosity nu_T = (Cs Delta)^2 |S| (seed 000 eq 3)
+    #: sub-particle turbulence: Smagorinsky eddy viscosity nu_T = (Cs Delta)^2 |S| (seed 000 eq 3), between
+    #: water particles; the walls' shear takes the water's own viscosity (the model has no wall damping,
+    #: docs/isph.md "No eddy viscosity in the wall's shear")
     turbulence: Literal["none", "smagorinsky"] = "none"
     smagorinsky_cs: PosFloat = 0.2
 

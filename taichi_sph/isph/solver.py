@@ -765,7 +765,8 @@ class ISPHSolver(SolverCommon):
         """Predictor (eq 19) with the drag implicit in the whole projection (SPEC 3 step 2):
         c = eps dt / Cr, D = 1 + c (a + b |vD|),  v* = (vD + c (g / eps + nu_E lap vD)) / D  and the
         PPE / corrector coefficient k = c / (D rho_bar), so that vD(n+1) = v* - k grad P equals
-        (vD + c (g / eps + nu_E lap vD) - c grad P / rho_bar) / D. Viscous term by eq 22. With
+        (vD + c (g / eps + nu_E lap vD) - c grad P / rho_bar) / D. Viscous term by eq 22; its wall pairs
+        take nu_w / eps without the eddy viscosity (the Smagorinsky model has no wall damping). With
         eps = 1: Cr = 1, a = b = 0, D = 1 (plain Navier-Stokes)."""
         dt = self.dt[None]
         ti.loop_config(serialize=self.serial)
@@ -786,11 +787,16 @@ class ISPHSolver(SolverCommon):
                         vj = self.v[j]
                         nu_j = nu_i
                         m_j, rb_j = self._mass_and_density(i, j)
+                        nu_ij = nu_i
                         if self.kind[j] == WALL:
+                            # the wall's shear with the water's own viscosity, no eddy viscosity
+                            # (docs/isph.md, "No eddy viscosity in the wall's shear")
                             vj = walls.mirror_velocity(vi, self.v[j], self.normal[j], self.no_slip)
+                            nu_ij = terms.effective_viscosity(self.nu, 0.0, eps_i)
+                            nu_j = nu_ij
                         else:
                             nu_j = terms.effective_viscosity(self.nu, self._eddy_viscosity(j), self.eps[j])
-                        lap += terms.viscous_pair(m_j, rb_i, nu_i, rb_j, nu_j, f, vi, vj)
+                        lap += terms.viscous_pair(m_j, rb_i, nu_ij, rb_j, nu_j, f, vi, vj)
                 c = eps_i * dt
                 drag = 1.0
                 if ti.static(self.porous):
@@ -1040,7 +1046,8 @@ class ISPHSolver(SolverCommon):
     def _wall_pressure_seen(self, i, j):
         """Kernel weight and pressure that water particle i gives wall particle j (virtual-marker idea of the
         seed): walls.wall_pressure_along_face, hydrostatic across the wall and the water's own gradient
-        along it; weight 0 for a dry wall."""
+        along it; weight 0 for a dry wall. Their weighted mean is the wall pressure of the run file; the
+        corrector takes each particle's own value."""
         wij = 0.0
         pw = 0.0
         if self._present(j):
@@ -1061,7 +1068,13 @@ class ISPHSolver(SolverCommon):
         its support that holds no water, and a particle with no water neighbour (spray, a droplet
         leaving a splash) hung in the air (docs/isph.md, "Gravity on every particle"). With the
         kernel-gradient correction (L_i = M_i^-1) the operator is exact for the linear hydrostatic P, so
-        water at rest still gets v = 0 to round-off wherever L_i exists."""
+        water at rest still gets v = 0 to round-off wherever L_i exists.
+
+        A wall particle seen from i carries the value i gives it (walls.wall_pressure_along_face: the
+        seed's virtual marker evaluated at i), not the wall's pressure interpolated over every particle
+        that sees it: next to a free-surface row that mean fell below P_i, pushed i into the wall, and a
+        cluster of pore water in a tank corner compressed itself from step to step (docs/isph.md, "A
+        wall's pressure seen from each particle")."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1:
@@ -1079,13 +1092,17 @@ class ISPHSolver(SolverCommon):
                         m_j, rb_j = self._mass_and_density(i, j)
                         if self.kind[j] != WALL and self.free[j] == 1:
                             near_free = 1
+                        pj = self.p[j]
+                        if self.kind[j] == WALL:
+                            pj = walls.wall_pressure_along_face(pi, self.rho_w, self.g, self.grad_p_water[i],
+                                                                self.normal[j], -rij)
                         if ti.static(self.grad_mode == GRAD_SYMMETRIC):
                             # eq 13 measured from the free surface's pressure p_s: the form is exact for a
                             # constant only on a full support, so with P itself a drop (every particle at
                             # p_s) pushed itself apart and a particle beside a wall was pushed off it
-                            gp += terms.pressure_gradient_symmetric(m_j, rb_i, rb_j, pi, self.p[j], gw)
+                            gp += terms.pressure_gradient_symmetric(m_j, rb_i, rb_j, pi, pj, gw)
                         else:
-                            gp += terms.pressure_gradient_difference(m_j, rb_j, pi, self.p[j], gw)
+                            gp += terms.pressure_gradient_difference(m_j, rb_j, pi, pj, gw)
                 if ti.static(self.grad_mode == GRAD_SYMMETRIC):
                     gp *= rb_i
                 if ti.static(self.grad_mode == GRAD_CORRECTED):
