@@ -49,9 +49,10 @@ class Switches:
                                                    "(isph.advection: pore); else the Darcy velocity")
     ground_cone: bool | None = _switch((ISPH,), "free surface in and next to the ground confirmed by an empty "
                                                 "cone (porous ground and isph.ground_surface_cone > 0)")
-    ground_tension: bool | None = _switch((ISPH,), "with the cone: free water next to the ground that the pressure "
-                                                   "equation holds in tension becomes free surface "
-                                                   "(isph.ground_surface_tension)")
+    ground_tension: bool | None = _switch((ISPH,), "with the cone: free water next to the ground, and pore water in "
+                                                   "drained ground, that the pressure equation holds in tension "
+                                                   "becomes free surface (isph.ground_surface_tension, "
+                                                   "isph.ground_tension_fill)")
     air_entry: bool | None = _switch((ISPH,), "pore water's suction clamped at the ground's air-entry value "
                                               "(porous ground and isph.air_entry_suction)")
     ground_correction: bool | None = _switch((ISPH,), "the kernel-gradient correction also inside saturated porous ground of weak drag "

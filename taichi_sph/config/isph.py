@@ -105,6 +105,14 @@ class ISPH(Strict):
     #: it, splashes over the free fall's layer, their cones blocked by the ground's water, held tensions
     #: of 10-150 kPa and threw water out of the tank (docs/isph.md, "Surface test in the ground")
     ground_surface_tension: bool = True
+    #: with ground_surface_tension: pore water (eps < 1) joins that rule where its number density <rho>
+    #: is below this fraction of its rest value (eps rho_w times its rest fill): ground that has
+    #: drained part of its pores cannot hold its water in suction (coarse ground's air-entry value is
+    #: some 0.1 kPa), while saturated pore water is left alone (a plug's exit face sits near zero
+    #: pressure). Without it, water hung in the free fall's eps0 0.8 layer for seconds at 0.7-0.87 of
+    #: its rest density under -0.5 to -2.8 kPa, and the volume measure ended +5..+7 % at dx 2 cm. 0 =
+    #: free water only (docs/isph.md, "Air into drained pores")
+    ground_tension_fill: Annotated[float, Field(ge=0, lt=1)] = 0.9
     #: with the cone test (ground_surface_cone > 0), in and next to porous ground: a particle whose
     #: number density <rho> is below this fraction of its rest value (eps rho_w) is free surface
     #: whatever its cone. Ground that drains holds its water in scattered pores with air between

@@ -135,6 +135,7 @@ class ISPHSolver(SolverCommon):
         self.ground_beta = float(cfg.isph.ground_surface_density)
         # free water next to the ground held in tension becomes free surface (_k_tension)
         self.ground_tension = sw.ground_tension
+        self.tension_fill = float(cfg.isph.ground_tension_fill)
         # kernel-gradient correction in the ground (L_i = M_i^-1 where eps_i < 1), else plain eq 12 there
         self.ground_correction = sw.ground_correction
         #: candidate of the cone test (in or next to the ground): eq 34's count or the plain count marks it,
@@ -932,12 +933,18 @@ class ISPHSolver(SolverCommon):
         only because the pore water below it is sparse) is closed to the air and keeps its tension, which
         there is the transient of discrete particles entering the pores (docs/isph.md, "Surface test in the
         ground"). Air advances one support per pass. Returns how many were freed (the PPE is then solved
-        again). Not applied inside the ground (eps_i < 1): near a plug's exit face the pore pressure is
-        near zero, and freeing its noise put Dirichlet rows into the plug."""
+        again). Inside the ground (eps_i < 1) only pore water that has drained, <rho_i> below
+        isph.ground_tension_fill of its rest value eps_i rho_w rest_fill_i, takes the rule (docs/isph.md,
+        "Air into drained pores"): saturated pore water near a plug's exit face sits near zero pressure,
+        and freeing its noise put Dirichlet rows into the plug."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             self.air_entry_now[i] = 0
-            if self.solve_mask[i] == 1 and self.free[i] == 0 and self.candidate[i] == 1 and self.eps[i] >= 1.0:
+            open_to_air = self.eps[i] >= 1.0
+            if ti.static(self.porous):
+                if self.eps[i] < 1.0:
+                    open_to_air = self.rho_n[i] < self.tension_fill * self.eps[i] * self.rho_w * self.rest_fill[i]
+            if self.solve_mask[i] == 1 and self.free[i] == 0 and self.candidate[i] == 1 and open_to_air:
                 if psol[self.row[i]] < 0.0:
                     for k in range(self.grid.nbr_count[i]):
                         j = self.grid.nbr[i, k]
