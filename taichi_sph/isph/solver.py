@@ -1050,18 +1050,23 @@ class ISPHSolver(SolverCommon):
         return self.solve_mask[i] == 1
 
     @ti.func
-    def _wall_pressure_seen(self, i, j):
-        """Kernel weight and pressure that water particle i gives wall particle j (virtual-marker idea of the
+    def _own_wall_pressure(self, i, j, d):
+        """Pressure that water particle i gives wall particle j, d = x_j - x_i (virtual-marker idea of the
         seed): walls.wall_pressure_along_face, hydrostatic across the wall and the water's own gradient
-        along it; weight 0 for a dry wall. Their weighted mean is the wall pressure of the run file; the
-        corrector takes each particle's own value."""
+        along it. The corrector takes it for each pair; its weighted mean is the wall pressure of the run
+        file (_wall_pressure_seen)."""
+        return walls.wall_pressure_along_face(self.p[i], self.rho_w, self.g, self.grad_p_water[i], self.normal[j], d)
+
+    @ti.func
+    def _wall_pressure_seen(self, i, j):
+        """Kernel weight and pressure (_own_wall_pressure) that water particle i gives wall particle j;
+        weight 0 for a dry wall."""
         wij = 0.0
         pw = 0.0
         if self._present(j):
             d = -operators.rel(self.x[i], self.x[j], self.period)
             wij = kernels.w(d.norm(), self.h, self.dim)
-            pw = walls.wall_pressure_along_face(self.p[i], self.rho_w, self.g, self.grad_p_water[i],
-                                                self.normal[j], d)
+            pw = self._own_wall_pressure(i, j, d)
         return wij, pw
 
     @ti.kernel
@@ -1077,8 +1082,8 @@ class ISPHSolver(SolverCommon):
         kernel-gradient correction (L_i = M_i^-1) the operator is exact for the linear hydrostatic P, so
         water at rest still gets v = 0 to round-off wherever L_i exists.
 
-        A wall particle seen from i carries the value i gives it (walls.wall_pressure_along_face: the
-        seed's virtual marker evaluated at i), not the wall's pressure interpolated over every particle
+        A wall particle seen from i carries the value i gives it (_own_wall_pressure: the seed's virtual
+        marker evaluated at i), not the wall's pressure interpolated over every particle
         that sees it: next to a free-surface row that mean fell below P_i, pushed i into the wall, and a
         cluster of pore water in a tank corner compressed itself from step to step (docs/isph.md, "A
         wall's pressure seen from each particle")."""
@@ -1101,8 +1106,7 @@ class ISPHSolver(SolverCommon):
                             near_free = 1
                         pj = self.p[j]
                         if self.kind[j] == WALL:
-                            pj = walls.wall_pressure_along_face(pi, self.rho_w, self.g, self.grad_p_water[i],
-                                                                self.normal[j], -rij)
+                            pj = self._own_wall_pressure(i, j, -rij)
                         if ti.static(self.grad_mode == GRAD_SYMMETRIC):
                             # eq 13 measured from the free surface's pressure p_s: the form is exact for a
                             # constant only on a full support, so with P itself a drop (every particle at
