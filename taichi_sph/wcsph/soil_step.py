@@ -209,7 +209,7 @@ class SoilPasses:
         first_bad = 2.0e9
         h = fl.h0
         ti.loop_config(serialize=fl.serial)
-        for m in range(fl.n_moving[None]):  # the moving particles (fluid and soil), solver.moving_ids
+        for m in range(fl.n if ti.static(fl.exact_grid) else fl.n_moving[None]):  # solver.moving_ids
             i = fl.moving_ids[m]
             if fl.fmask[i] == 2:
                 si = fl.s[i]
@@ -369,7 +369,7 @@ class SoilPasses:
         fl = self.fl
         h = fl.h0
         ti.loop_config(serialize=fl.serial)
-        for m in range(fl.n_moving[None]):  # the moving particles (fluid and soil), solver.moving_ids
+        for m in range(fl.n if ti.static(fl.exact_grid) else fl.n_moving[None]):  # solver.moving_ids
             i = fl.moving_ids[m]
             if fl.fmask[i] == 1 and fl.kind[i] == WATER:
                 xi = fl.xf(i)
@@ -446,7 +446,7 @@ class SoilPasses:
         interior this is C_s phi_w (u_bar - v_s) with C_s = n rho_w / rho_soil g / k."""
         fl = self.fl
         ti.loop_config(serialize=fl.serial)
-        for m in range(fl.n_moving[None]):  # the moving particles (fluid and soil), solver.moving_ids
+        for m in range(fl.n if ti.static(fl.exact_grid) else fl.n_moving[None]):  # solver.moving_ids
             i = fl.moving_ids[m]
             if fl.fmask[i] == 2:
                 fsum = ti.Vector.zero(float, fl.dim)
@@ -471,7 +471,7 @@ class SoilPasses:
         tot = ti.Vector.zero(float, fl.dim)
         big = 0.0
         ti.loop_config(serialize=fl.serial)
-        for m in range(fl.n_moving[None]):  # the moving particles (fluid and soil), solver.moving_ids
+        for m in range(fl.n if ti.static(fl.exact_grid) else fl.n_moving[None]):  # solver.moving_ids
             i = fl.moving_ids[m]
             if fl.fmask[i] == 2:
                 f = self.fdrag[i]

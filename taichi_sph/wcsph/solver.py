@@ -244,6 +244,12 @@ class WCSPHSolver(SolverCommon):
         self.deal = deal_threads(self.has_soil, self.serial)
         self.moving_tmp = ti.field(ti.i32, n if self.deal > 1 else 1)
         self._moving_scan = PrefixSum(n)
+        # on GPUs the passes over moving_ids launch all n entries, the particles that do not move listed after
+        # the moving ones and turned away by their fmask: a loop whose count is read from a field runs on
+        # Taichi's saturating grid (540,672 threads on an H100) whatever the count, each thread ending with
+        # its own atomic per reduction, and the pair pass cost 6.6-6.9 ms of device time a step so at 10k
+        # and at 200k particles; 1.1 and 2.8 ms a step now (docs/performance.md, GPU, "Third round")
+        self.exact_grid = self._moving_scan.blocked
         self.moving_flag = ti.field(ti.i32, n if self._moving_scan.blocked else 1)
         self.moving_start = ti.field(ti.i32, n + 1 if self._moving_scan.blocked else 1)
         self.group = ti.field(ti.i32, n if self.has_soil else 1)  # the list order of a neighbour (_k_mask)
@@ -483,6 +489,8 @@ class WCSPHSolver(SolverCommon):
             for i in range(self.n):
                 if self.fmask[i] >= 1:
                     self.moving_ids[self.moving_start[i]] = i
+                else:  # the particles that do not move after them (exact_grid's loops run over all n)
+                    self.moving_ids[self.moving_start[self.n] + i - self.moving_start[i]] = i
             self.n_moving[None] = self.moving_start[self.n]
         else:
             self.n_moving[None] = 0
@@ -698,7 +706,7 @@ class WCSPHSolver(SolverCommon):
         bad = 0.0
         first_bad = 2.0e9
         ti.loop_config(serialize=self.serial)
-        for m in range(self.n_moving[None]):
+        for m in range(self.n if ti.static(self.exact_grid) else self.n_moving[None]):  # moving_ids
             i = self.moving_ids[m]
             if self.fmask[i] == 1:
                 si = self.s[i]
