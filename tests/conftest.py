@@ -32,7 +32,10 @@ def cuda_available() -> bool:
 
 
 def pytest_collection_modifyitems(config, items):
-    """Tests marked `cuda` are skipped where Taichi finds no CUDA GPU."""
+    """Tests marked `long` run first (a stable sort: the order within each kind is kept), so that with `-n`
+    the workers do not end with one of them running alone: the two longest sat near the end of the
+    collection. Tests marked `cuda` are skipped where Taichi finds no CUDA GPU."""
+    items.sort(key=lambda item: item.get_closest_marker("long") is None)
     marked = [item for item in items if item.get_closest_marker("cuda")]
     if marked and not cuda_available():
         skip = pytest.mark.skip(reason="no CUDA GPU found by Taichi")

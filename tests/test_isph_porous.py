@@ -107,6 +107,7 @@ def freefall_coarse(tmp_path_factory):
                     f"end_time={FREEFALL_COARSE_END}", "--out", out, "--no-progress")
 
 
+@pytest.mark.long  # its group computes the fixture
 @pytest.mark.xdist_group("freefall_coarse")  # reads the free fall's run (fixture freefall_coarse)
 def test_markers_stored_in_the_run_file(freefall_coarse):
     """/markers holds the SPEC 8 names; the seed's 21 x 21 x 21 markers lie inside the tank."""

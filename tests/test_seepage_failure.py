@@ -100,6 +100,7 @@ def _sheetpile_heave(run_cli, tmp_path, head, name, end=1.5):
     return dh, float(lift[np.asarray(t) > 0.5].max()), float(lift[-1])
 
 
+@pytest.mark.long
 def test_sheetpile_heaves_within_20_percent_of_terzaghi(run_cli, tmp_path):
     """Terzaghi's prism criterion for the coarse sheet pile (dx 0.02, pile 6 cm thick, D = 0.06 m, bed
     0.20 m): the flow net gives a mean excess head of 0.209 dH on the base of the prism D deep and D / 2
@@ -161,6 +162,7 @@ def _dry_front(path):
     return t, front, boussinesq_front(0.15, 0.4, 1.0, integral)  # 1.62 sqrt(k integral(H dt) / S)
 
 
+@pytest.mark.long
 def test_dry_levee_wetting_front_follows_boussinesq(run_cli, tmp_path):
     """configs/embankment.yaml `dry` at dx 0.02, shortened as the first-yield test (k five times the
     shipped, 0.15 m/s: the Boussinesq front's time scale is 1 / k), 4 s: the river (0.12 m, falling to

@@ -53,6 +53,7 @@ def test_dry_column_at_rest(run_cli, tmp_path):
     assert abs(ratio.mean() - 1) < 0.05 and np.abs(ratio - 1).max() < 0.1, (ratio.mean(), ratio.min(), ratio.max())
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("k", [pytest.param(1e-3, marks=pytest.mark.xdist_group("soil_column")), 1e-5])
 def test_saturated_column_at_rest(run_cli, tmp_path, k, request):
     """configs/soil_column.yaml (saturated), 0.2 s: the soil must stay at rest with sigma'_v = (gamma_sat -
@@ -299,6 +300,7 @@ def test_dry_column_collapse(run_cli, tmp_path):
     assert abs(r1 - r2) / r2 < 0.15, results
 
 
+@pytest.mark.long
 def test_terzaghi_consolidation(run_cli, tmp_path):
     """configs/consolidation.yaml (seed 002 fig 10) at its dx = 0.01 m (5 particle columns, 20 rows of soil):
     sine start u0 cos(pi y / H), H = 0.4 m (half layer on the floor), drained at the top. Exact: u_e / u0 =
@@ -322,6 +324,7 @@ def test_terzaghi_consolidation(run_cli, tmp_path):
         assert err < 0.05, (tv, np.round(ue, 3), np.round(exact, 3))
 
 
+@pytest.mark.long
 def test_soft_pore_water_warns_and_is_recorded(run_cli, tmp_path):
     """A config whose water is softer than 40 M (consolidation.yaml with the seed-like c0 = 20 m/s: K_f =
     0.4 MPa, M = E (1 - nu) / ((1 + nu) (1 - 2 nu)) = 1.346 MPa) warns, naming the keys, and the run file

@@ -28,6 +28,7 @@ u_e is the water pressure minus that of a twin run without the load and with the
 twin relaxes its own start, ~20 Pa at mid-depth; with another k it relaxes at another rate)."""
 
 import numpy as np
+import pytest
 
 from taichi_sph.wcsph.consolidation import consolidation_coefficient, exact_excess, water_rows
 
@@ -96,6 +97,7 @@ def dissipation_errors(t, y, ue, cv, tvs):
     return out
 
 
+@pytest.mark.long
 def test_undrained_loading_and_consolidation(run_cli, tmp_path):
     """(1) Undrained ratio at mid-depth, k = 5e-5 m/s (c_v = 6.9e-3 m^2/s: Tv = 0.0017 by 40 ms, the load
     is undrained while it rings), t_0+ = the first 40 ms, 7 ringing periods or 28 crossings of the column
