@@ -1018,30 +1018,32 @@ class ISPHSolver(SolverCommon):
         pressure takes along the wall's face."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
-            if self.solve_mask[i] == 1:
+            near_wall = 0
+            if self.solve_mask[i] == 1:  # the sums below only for a particle with a wall in its list
+                for k in range(self.grid.nbr_count[i]):
+                    if self.kind[self.grid.nbr[i, k]] == WALL:
+                        near_wall = 1
+                        break
+            if near_wall == 1:
                 xi = self.x[i]
                 pi = self.p[i]
-                near_wall = 0
                 M = ti.Matrix.zero(float, self.dim, self.dim)
                 s = ti.Vector.zero(float, self.dim)
                 for k in range(self.grid.nbr_count[i]):
                     j, rij, r = self._pair(i, k, xi)
-                    if self.kind[j] == WALL:
-                        near_wall = 1
-                    elif self.solve_mask[j] == 1:
+                    if self.kind[j] != WALL and self.solve_mask[j] == 1:
                         if r > 0.0:
                             gw = kernels.grad_w(rij, r, self.h, self.dim)
                             vj = self._volume(j)
                             M += terms.moment_pair(vj, rij, gw)
                             s += vj * (self.p[j] - pi) * gw
-                if near_wall == 1:
-                    # corrected wherever the water spans every direction: a corner of the tank leaves a
-                    # quarter (3D: an eighth) of the support, eigenvalues near 1/4 and det ~ 0.02 in 3D;
-                    # a chain or a sheet of particles has det = 0 (there the plain sum, zero for a lone
-                    # particle)
-                    if M.determinant() > ti.static(0.1**self.dim):
-                        s = M.inverse() @ s
-                    self.grad_p_water[i] = s
+                # corrected wherever the water spans every direction: a corner of the tank leaves a
+                # quarter (3D: an eighth) of the support, eigenvalues near 1/4 and det ~ 0.02 in 3D;
+                # a chain or a sheet of particles has det = 0 (there the plain sum, zero for a lone
+                # particle)
+                if M.determinant() > ti.static(0.1**self.dim):
+                    s = M.inverse() @ s
+                self.grad_p_water[i] = s
 
     @ti.func
     def _wall_source(self, i):
@@ -1326,7 +1328,6 @@ class ISPHSolver(SolverCommon):
         if self.ground_cone:
             self._k_remember_air()
         self._k_water_gradient()
-        self.wall_pressure.update()
         self._k_corrector()
         collisions = 0
         if self.collision:
@@ -1369,8 +1370,11 @@ class ISPHSolver(SolverCommon):
 
     # ------------------------------------------------------------------ output
     def fields_by_id(self) -> dict:
-        """Per-particle arrays in id order (SPEC 8 frame fields)."""
+        """Per-particle arrays in id order (SPEC 8 frame fields). The wall particles' pressure is the kernel
+        mean of what the water around gives them (walls.WallPressure), computed here: the step itself takes
+        each water particle's own value at a wall (_own_wall_pressure)."""
         n = self.n
+        self.wall_pressure.update()
         order = self._id_order()
         kind = self.kind.to_numpy()[:n][order]
         rho = self.rho_n.to_numpy()[:n][order]
