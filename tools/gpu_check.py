@@ -11,11 +11,12 @@ device time (`profile`: tools/bench.py --kernel-profile). A check that overruns 
         [--budget freefall=90 ...] [--scale 1.0] [--arch cpu]
 
 `--only` runs those checks in the order given (after `start`), so that the ones that matter most come
-first when device time is short. With about 15 minutes of GPU time (the machine's start included), one
-call of about 10 minutes:
+first when device time is short. With about 15 minutes of GPU time (the machine's start included, 1-2
+minutes), one call of about 10 minutes; the third round (docs/performance.md) ran the tests (91 s with 4
+workers) and the profile (52 s), so next: what was never reached, and the parity after the isph changes
 
-    python tools/gpu_check.py --out DIR --only profile bandwidth freefall tests parity bench \
-        --budget profile=100 bandwidth=60 freefall=90 tests=120 parity=150 bench=90
+    python tools/gpu_check.py --out DIR --only tests parity configs bench3d \
+        --budget tests=120 parity=150 configs=200 bench3d=120
 
 `--budget NAME=SECONDS` sets one check's budget; `--scale` multiplies every budget. The tests and the
 parity cases run four processes at once (each a CPU and a GPU run), the other checks one. `--arch cpu` runs the same sequence on the CPU (a dry run of the
