@@ -210,6 +210,8 @@ class ISPHSolver(SolverCommon):
         #: per neighbour slot whether the pair is water of one body (_water_pair), read once per step by
         #: _k_body_init and then by every sweep
         self.body_link = ti.field(ti.i8, (n, self.max_nb) if self.porous else (1, 1))
+        #: each water particle's own reach of the pair test (_body_reach), taken once per step
+        self.body_reach = ti.field(float, n if self.porous else 1)
         self.closed_bodies = ti.field(ti.i32, ())
         self.body_changed = ti.field(ti.i32, ())
         self.any_free = ti.field(ti.i32, ())
@@ -519,16 +521,20 @@ class ISPHSolver(SolverCommon):
         self._k_body_close()
 
     @ti.func
+    def _body_reach(self, eps):
+        """The pair test's distance at porosity eps: BODY_LINK r_e, or LATTICE_LINK pore-lattice spacings
+        dx eps^(-1/dim) where that is farther (ground of eps below ~0.24 in 2D, ~0.11 in 3D, whose lattice
+        neighbours lie beyond BODY_LINK r_e), never beyond r_e. It does not grow with eps."""
+        return ti.min(ti.max(BODY_LINK * self.re, LATTICE_LINK * self.dx * ti.pow(eps, -1.0 / self.dim)), self.re)
+
+    @ti.func
     def _water_pair(self, i, j) -> ti.i32:
-        """Whether i and j are water of one body: both solved, closer than BODY_LINK r_e, or than
-        LATTICE_LINK pore-lattice spacings dx eps^(-1/dim) of the sparser of the two where that is farther
-        (ground of eps below ~0.24 in 2D, ~0.11 in 3D, whose lattice neighbours lie beyond BODY_LINK r_e),
-        never beyond r_e."""
+        """Whether i and j are water of one body: both solved and closer than the reach (_body_reach) of
+        the sparser of the two, the larger of their two reaches (body_reach, taken per particle: a power
+        per pair cost as much as the rest of the body search)."""
         ok = 0
         if self.kind[j] == WATER and self.solve_mask[j] == 1 and j != i:
-            eps = ti.min(self.eps[i], self.eps[j])
-            link = ti.min(ti.max(BODY_LINK * self.re, LATTICE_LINK * self.dx * ti.pow(eps, -1.0 / self.dim)),
-                          self.re)
+            link = ti.max(self.body_reach[i], self.body_reach[j])
             if operators.rel(self.x[i], self.x[j], self.period).norm() < link:
                 ok = 1
         return ok
@@ -542,6 +548,10 @@ class ISPHSolver(SolverCommon):
             self.body_open[i] = 0
             self.body_pick[i] = ti.i64(1) << 62
             self.body_size[i] = 0
+            if self.solve_mask[i] == 1:
+                self.body_reach[i] = self._body_reach(self.eps[i])
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n):
             if self.solve_mask[i] == 1:
                 for k in range(self.grid.nbr_count[i]):
                     self.body_link[i, k] = ti.cast(self._water_pair(i, self.grid.nbr[i, k]), ti.i8)
