@@ -478,6 +478,7 @@ class WCSPHSolver(SolverCommon):
     @ti.kernel
     def _k_moving_list(self):
         """The indices of the moving particles (fmask >= 1), in index order, into moving_ids[:n_moving]; with
+        the blocked prefix sum (GPUs) the other particles follow them in index order (exact_grid); with
         `deal` threads, the chunks of DEAL_CHUNK of that order dealt to the threads by a hash of the chunk's
         index, thread t's chunks forming the t-th block of the list (about the block Taichi's CPU backend
         gives that thread)."""
