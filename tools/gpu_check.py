@@ -16,7 +16,9 @@ minutes), one call of about 10 minutes; the third round (docs/performance.md) ra
 workers) and the profile (52 s), so next: what was never reached, and the parity after the isph changes
 
     python tools/gpu_check.py --out DIR --only tests parity configs bench3d \
-        --budget tests=120 parity=150 configs=200 bench3d=120
+        --budget tests=110 parity=130 configs=180 bench3d=100
+
+(at most 520 s of checks, inside the device's 600 s a command)
 
 `--budget NAME=SECONDS` sets one check's budget; `--scale` multiplies every budget. The tests and the
 parity cases run four processes at once (each a CPU and a GPU run), the other checks one. `--arch cpu` runs the same sequence on the CPU (a dry run of the
