@@ -680,7 +680,7 @@ class ISPHSolver(SolverCommon):
                     # draining ground: scattered pore water with air between, a deficit of number
                     # density with no empty cone (isph.ground_surface_density)
                     if ti.static(self.ground_beta > 0.0):
-                        if self.rho_n[i] < self.ground_beta * self.eps[i] * self.rho_w * self.rest_fill[i]:
+                        if self.rho_n[i] < self.ground_beta * self._rest_density(i):
                             is_free = 1
                     self.free[i] = is_free
 
@@ -716,6 +716,16 @@ class ISPHSolver(SolverCommon):
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             self.air_last[i] = self.free[i]
+
+    @ti.func
+    def _rest_density(self, i):
+        """<rho_i> of water particle i at rest: eps_i rho_w, times its rest fill (_k_rest_fill) with porous
+        ground. Eq 31's stabilisation relaxes towards it; the ground's free-surface and tension rules
+        measure a drained pore against fractions of it."""
+        out = self.eps[i] * self.rho_w
+        if ti.static(self.porous):
+            out *= self.rest_fill[i]
+        return out
 
     @ti.kernel
     def _k_rest_fill(self):
@@ -900,10 +910,7 @@ class ISPHSolver(SolverCommon):
                                 else:
                                     self._ppe_add(A, ri, self.row[j], -K)
                     div /= rb_i
-                    rho_ref = rb_i
-                    if ti.static(self.porous):
-                        rho_ref *= self.rest_fill[i]
-                    stab = terms.density_stabilisation(self.alpha, eps_i, rho_ref, self.rho_n[i], dt)
+                    stab = terms.density_stabilisation(self.alpha, eps_i, self._rest_density(i), self.rho_n[i], dt)
                     if ti.static(self.porous):
                         # the density error is relaxed through the same drag as the flow: without the
                         # 1 / D, fine sand (D ~ 300 at D50 = 0.1 mm) turns a 1 % density error into
@@ -953,7 +960,7 @@ class ISPHSolver(SolverCommon):
             open_to_air = self.eps[i] >= 1.0
             if ti.static(self.porous):
                 if self.eps[i] < 1.0:
-                    open_to_air = self.rho_n[i] < self.tension_fill * self.eps[i] * self.rho_w * self.rest_fill[i]
+                    open_to_air = self.rho_n[i] < self.tension_fill * self._rest_density(i)
             if self.solve_mask[i] == 1 and self.free[i] == 0 and self.candidate[i] == 1 and open_to_air:
                 if psol[self.row[i]] < 0.0:
                     for k in range(self.grid.nbr_count[i]):
