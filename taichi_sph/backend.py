@@ -7,11 +7,26 @@ from pathlib import Path
 
 from .errors import InputError
 
+#: The offline cache's size limit in bytes. Taichi's default, 100 MB, holds about 3000 compiled kernels. A
+#: kernel is compiled for the sizes of its scene (particle count, grid), so a set of scenes (a sweep over
+#: dx, the test suite's few hundred scenes) outgrows that, and Taichi's least-recently-used cleaning then
+#: deletes a quarter of the files at a process's exit: kernels that a later run of the same scene compiles
+#: again, seconds each. The test suite's kernels alone take 227 MB (6956 files, 2026-11-28). Taichi holds
+#: the limit in a 32-bit int: at most 2 GiB - 1.
+CACHE_MAX_BYTES = 1 << 30
+
 
 def _cache_dir() -> str:
     base = os.environ.get("TAICHI_SPH_CACHE") or os.path.join(
         os.environ.get("XDG_CACHE_HOME", str(Path.home() / ".cache")), "taichi-sph")
     return str(Path(base) / "ticache")
+
+
+def offline_cache_options() -> dict:
+    """The `ti.init` arguments of the project's offline cache: its folder ($TAICHI_SPH_CACHE, else
+    ~/.cache/taichi-sph) and its size limit (CACHE_MAX_BYTES)."""
+    return {"offline_cache": True, "offline_cache_file_path": _cache_dir(),
+            "offline_cache_max_size_of_files": CACHE_MAX_BYTES}
 
 
 def resolved_precision(precision: str, gpu: bool, mode: str | None) -> str:
@@ -46,7 +61,7 @@ def init(arch: str = "cpu", precision: str = "auto", threads: int | None = None,
         if fp == "auto":
             fp = auto_precision(candidate, mode)
         kwargs = dict(arch=candidate, default_fp=ti.f64 if fp == "f64" else ti.f32, random_seed=0,
-                      offline_cache=True, offline_cache_file_path=_cache_dir(), debug=debug,
+                      debug=debug, **offline_cache_options(),
                       log_level=os.environ.get("TI_LOG_LEVEL", "warn"))
         if candidate == ti.cpu and threads:
             kwargs["cpu_max_num_threads"] = int(threads)

@@ -47,7 +47,9 @@ def pytest_collection_modifyitems(config, items):
 def ti_cpu():
     import taichi as ti
 
-    ti.init(arch=ti.cpu, default_fp=ti.f64, random_seed=0, log_level=ti.WARN)
+    from taichi_sph.backend import offline_cache_options
+
+    ti.init(arch=ti.cpu, default_fp=ti.f64, random_seed=0, log_level=ti.WARN, **offline_cache_options())
     yield ti
 
 
