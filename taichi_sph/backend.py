@@ -53,6 +53,9 @@ def init(arch: str = "cpu", precision: str = "auto", threads: int | None = None,
     `mode` (the config's) decides what `precision: auto` means (`auto_precision`)."""
     import taichi as ti
 
+    from . import taichi_frontend
+
+    taichi_frontend.install()
     names = {"cpu": [ti.cpu], "cuda": [ti.cuda], "vulkan": [ti.vulkan], "auto": [ti.cuda, ti.cpu]}
     chosen = None
     last_err = None
