@@ -48,10 +48,10 @@ def ti_cpu():
     import taichi as ti
 
     from taichi_sph import taichi_frontend
-    from taichi_sph.backend import offline_cache_options
+    from taichi_sph.backend import taichi_options
 
     taichi_frontend.install()
-    ti.init(arch=ti.cpu, default_fp=ti.f64, random_seed=0, log_level=ti.WARN, **offline_cache_options())
+    ti.init(arch=ti.cpu, default_fp=ti.f64, random_seed=0, log_level=ti.WARN, **taichi_options())
     yield ti
 
 

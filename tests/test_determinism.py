@@ -15,8 +15,8 @@ SCRIPT = r"""
 import numpy as np
 import taichi as ti
 
-from taichi_sph.backend import offline_cache_options
-ti.init(arch=ti.cpu, default_fp=ti.f64, cpu_max_num_threads=1, log_level=ti.WARN, **offline_cache_options())
+from taichi_sph.backend import taichi_options
+ti.init(arch=ti.cpu, default_fp=ti.f64, cpu_max_num_threads=1, log_level=ti.WARN, **taichi_options())
 from taichi_sph.config import load_config
 from taichi_sph.isph.solver import ISPHSolver
 from taichi_sph.scene import build_scene
@@ -81,8 +81,8 @@ SCAN_SCRIPT = r"""
 import numpy as np
 import taichi as ti
 
-from taichi_sph.backend import offline_cache_options
-ti.init(arch=ti.cpu, default_fp=ti.f64, cpu_max_num_threads=1, log_level=ti.WARN, **offline_cache_options())
+from taichi_sph.backend import taichi_options
+ti.init(arch=ti.cpu, default_fp=ti.f64, cpu_max_num_threads=1, log_level=ti.WARN, **taichi_options())
 from taichi_sph.config import load_config
 from taichi_sph.scene import build_scene
 from taichi_sph.solvers import make_solver
@@ -133,8 +133,8 @@ RETURN_SCRIPT = r"""
 import numpy as np
 import taichi as ti
 
-from taichi_sph.backend import offline_cache_options
-ti.init(arch=ti.cpu, default_fp=ti.f32, cpu_max_num_threads=1, log_level=ti.WARN, **offline_cache_options())
+from taichi_sph.backend import taichi_options
+ti.init(arch=ti.cpu, default_fp=ti.f32, cpu_max_num_threads=1, log_level=ti.WARN, **taichi_options())
 from taichi_sph.config import load_config
 from taichi_sph.config.load import read_yaml
 from taichi_sph.scene import build_scene
@@ -186,8 +186,8 @@ SERIAL_SCRIPT = r"""
 import numpy as np
 import taichi as ti
 
-from taichi_sph.backend import offline_cache_options
-ti.init(arch=ti.cpu, default_fp=ti.f64, cpu_max_num_threads=1, log_level=ti.WARN, **offline_cache_options())
+from taichi_sph.backend import taichi_options
+ti.init(arch=ti.cpu, default_fp=ti.f64, cpu_max_num_threads=1, log_level=ti.WARN, **taichi_options())
 from taichi_sph.linalg import ell_pcg
 from tests.test_ell_pcg import random_spd, sph_lattice_ppe
 

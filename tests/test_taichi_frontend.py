@@ -10,7 +10,7 @@ SCRIPT = r"""
 import json
 import taichi as ti
 from taichi_sph import taichi_frontend
-from taichi_sph.backend import offline_cache_options
+from taichi_sph.backend import taichi_options
 from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
 
 original = taichi_frontend.original_get_pos_info()
@@ -31,7 +31,7 @@ def checked(self, node):
 
 
 ASTTransformerContext.get_pos_info = checked
-ti.init(arch=ti.cpu, default_fp=ti.f64, cpu_max_num_threads=1, log_level=ti.WARN, **offline_cache_options())
+ti.init(arch=ti.cpu, default_fp=ti.f64, cpu_max_num_threads=1, log_level=ti.WARN, **taichi_options())
 from taichi_sph.config import load_config
 from taichi_sph.scene import build_scene
 from taichi_sph.solvers import make_solver
