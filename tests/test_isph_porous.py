@@ -435,6 +435,41 @@ def test_drained_gravel_holds_no_water_in_suction(ti_cpu):
         print(f"dt {dt}: water in the layer at 1 s {in_layer:.3f}")
         assert in_layer < 0.12, (dt, in_layer)
 
+def test_freefall_does_not_follow_round_off_in_the_tank_corners(ti_cpu):
+    """The seed's free fall (variant coarse) in a tank of 0.1 x 0.1 m (the block of the test above over the
+    shipped eps0 0.3 layer), 60 ms, from the lattice and from the lattice moved by 1e-12 dx (uniform per
+    particle and axis): the block enters the ground at 35 ms, and the two runs must stay as near as
+    round-off growth takes them. The wall collision once took the nearest wall particle only: a particle in
+    the tank's corner column is as near to two faces, so round-off chose the face, and the full-width free
+    fall's runs parted by 1.2e-2 dx within the step of 35 ms (CPU against CUDA likewise, docs/performance.md
+    "Fourth round"). Measured since every face is taken: 3.7e-11 dx (1.1e-3 dx with the nearest face only);
+    bound 1e-6 dx, where one flipped decision moves a particle by 1e-3 dx or more."""
+    from taichi_sph.config import load_config
+    from taichi_sph.isph.solver import ISPHSolver
+    from taichi_sph.scene import build_scene
+
+    narrow = ["tank.size=[0.1, 0.1, 0.7]", "water=[{min: [0.0, 0.0, 0.40], max: [0.10, 0.10, 0.60]}]",
+              "soil.regions=[{min: [0.0, 0.0, 0.20], max: [0.10, 0.10, 0.40], eps0: 0.3, d50: 0.01}]"]
+    cfg = load_config(ROOT / "configs" / "freefall.yaml", variant="coarse", overrides=narrow)
+    scene = build_scene(cfg)
+    solver = ISPHSolver(cfg, scene)
+    solver.initial_diagnostics()
+    start = solver.state()
+    moved = dict(start)
+    water = start["kind"] == 0
+    rng = np.random.default_rng(1)
+    moved["x"] = start["x"] + np.where(water[:, None], rng.uniform(-1, 1, start["x"].shape), 0.0) * 1e-12 * cfg.dx
+    ends = []
+    for state in (start, moved):
+        solver.load_state(state)
+        for _ in range(60):
+            solver.step(0.001)
+        ends.append(solver.fields_by_id()["position"])
+    apart = float(np.abs(ends[0] - ends[1]).max()) / cfg.dx
+    print(f"largest difference after 60 ms: {apart:.2e} dx")
+    assert apart < 1e-6, apart
+
+
 def test_lone_particles_in_a_corner_of_the_ground_are_free_surface(ti_cpu):
     """Two water particles, one above the other, in a vertical edge of a tank filled with ground of
     eps0 0.8 (3D), beside a pool resting in the ground. Eq 34 in the ground holds the count against
