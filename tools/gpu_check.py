@@ -12,13 +12,14 @@ device time (`profile`: tools/bench.py --kernel-profile). A check that overruns 
 
 `--only` runs those checks in the order given (after `start`), so that the ones that matter most come
 first when device time is short. With about 15 minutes of GPU time (the machine's start included, 1-2
-minutes), one call of about 10 minutes; the third round (docs/performance.md) ran the tests (91 s with 4
-workers) and the profile (52 s), so next: what was never reached, and the parity after the isph changes
+minutes), one call of about 10 minutes; the fourth round (docs/performance.md) ran the tests (57 s),
+the parity (112 s), the configs (24 of 31 in 170 s) and the 3D step (89 s), so next: the parity and the
+configs again after the isph changes of that round, then the free fall timed alone
 
-    python tools/gpu_check.py --out DIR --only tests parity configs bench3d \
-        --budget tests=110 parity=130 configs=180 bench3d=100
+    python tools/gpu_check.py --out DIR --only parity configs freefall \
+        --budget parity=130 configs=300 freefall=100
 
-(at most 520 s of checks, inside the device's 600 s a command)
+(at most 530 s of checks, inside the device's 600 s a command)
 
 `--budget NAME=SECONDS` sets one check's budget; `--scale` multiplies every budget. The tests and the
 parity cases run four processes at once (each a CPU and a GPU run), the other checks one. `--arch cpu` runs the same sequence on the CPU (a dry run of the

@@ -54,7 +54,9 @@ CASES = {
 
 #: the largest difference accepted, per comparison (set before any GPU run; on an H100 the six cases
 #: differed by 1e-14 to 7e-9 of these units, docs/performance.md "GPU": both backends' CG solves stopped at
-#: the same iteration, which the bounds do not assume). Fields: the two backends sum in another order (atomic adds and reductions on the GPU), and
+#: the same iteration, which the bounds do not assume; the free fall, since the wall collision takes every
+#: face of a corner, 2.4e-6 dx and 3e-5 of its kinetic energy, where a round-off tie between a corner's two
+#: faces had parted the backends by 0.1 dx and 41 %, docs/performance.md "Fourth round"). Fields: the two backends sum in another order (atomic adds and reductions on the GPU), and
 #: an isph PPE solve that stops at a relative residual of 1e-8 is within cond(A) x 1e-8 ~ 1e-5 of the exact
 #: pressure (cond ~ 1e3 for these tanks); that difference in the pressure gradient, 1e-5 g, moves a particle
 #: by 1e-5 g t^2 / 2 ~ 1e-5 dx over these runs. 1e-4 dx and 2e-5 rho_w g H hold that and nothing a wrong
