@@ -739,7 +739,10 @@ DIAGNOSES = {
                 "0.754 before pore water in drained ground joined the tension rule); at eps0 0.8 these hang on "
                 "the time step (0.236 / 0.224 / 0.208 s and 0.750 / 0.745 / 0.715 at dt 1 / 0.625 / 0.5 ms, "
                 "about half of it eq 31's per-step stabilisation), at eps0 0.3 they do not (within 0.013 s "
-                "and 0.007; docs/freefall.md, \"The time step at dx 1 cm\"); the seed's geometry (its "
+                "and 0.007; docs/freefall.md, \"The time step at dx 1 cm\"). Since the wall collision takes "
+                "every face of a corner (2026-11-28) the eps0 0.8 fraction holds at 0.750 / 0.738 / 0.750 over "
+                "those steps and the arrival still moves (0.239 / 0.221 / 0.215 s); eps0 0.3 reads 0.377 / "
+                "0.374 / 0.386 s and 0.282 / 0.291 / 0.292; the seed's geometry (its "
                 "figure 5 is not in the text) is our reading.",
 }
 
