@@ -404,6 +404,23 @@ def test_freefall_coarse_volume_and_fraction_in_layer(freefall_coarse):
 
 
 
+def _narrow_freefall(eps0):
+    """configs/freefall.yaml, variant coarse, in a tank of 0.1 x 0.1 m: a 0.1 x 0.1 x 0.2 m block of 250
+    water particles over the 0.2 m layer of porosity eps0 (D50 1 cm). Returns (cfg, scene, solver), the
+    solver's initial diagnostics taken."""
+    from taichi_sph.config import load_config
+    from taichi_sph.isph.solver import ISPHSolver
+    from taichi_sph.scene import build_scene
+
+    narrow = ["tank.size=[0.1, 0.1, 0.7]", "water=[{min: [0.0, 0.0, 0.40], max: [0.10, 0.10, 0.60]}]",
+              f"soil.regions=[{{min: [0.0, 0.0, 0.20], max: [0.10, 0.10, 0.40], eps0: {eps0}, d50: 0.01}}]"]
+    cfg = load_config(ROOT / "configs" / "freefall.yaml", variant="coarse", overrides=narrow)
+    scene = build_scene(cfg)
+    solver = ISPHSolver(cfg, scene)
+    solver.initial_diagnostics()
+    return cfg, scene, solver
+
+
 def test_drained_gravel_holds_no_water_in_suction(ti_cpu):
     """The seed's free fall through its most open layer (configs/freefall.yaml, variant coarse, eps0 0.8,
     D50 1 cm) in a tank of 0.1 x 0.1 m (a 0.1 x 0.1 x 0.2 m block of 250 water particles over the 0.2 m
@@ -415,16 +432,7 @@ def test_drained_gravel_holds_no_water_in_suction(ti_cpu):
     ground joined the tension rule (docs/isph.md, "Air into drained pores") 0.544 / 0.176, the rest
     hanging in the layer's lower part under suction. Bound 0.12: the capillary 4 % and the drops still
     in transit, which scatter by the run (0.06-0.10 over 0.8-1.0 s in runs with frames)."""
-    from taichi_sph.config import load_config
-    from taichi_sph.isph.solver import ISPHSolver
-    from taichi_sph.scene import build_scene
-
-    narrow = ["tank.size=[0.1, 0.1, 0.7]", "water=[{min: [0.0, 0.0, 0.40], max: [0.10, 0.10, 0.60]}]",
-              "soil.regions=[{min: [0.0, 0.0, 0.20], max: [0.10, 0.10, 0.40], eps0: 0.8, d50: 0.01}]"]
-    cfg = load_config(ROOT / "configs" / "freefall.yaml", variant="coarse", overrides=narrow)
-    scene = build_scene(cfg)
-    solver = ISPHSolver(cfg, scene)
-    solver.initial_diagnostics()
+    _, scene, solver = _narrow_freefall(0.8)
     start = solver.state()
     water = scene.kind == 0
     for dt in (0.0009, 0.0011):
@@ -437,6 +445,7 @@ def test_drained_gravel_holds_no_water_in_suction(ti_cpu):
         print(f"dt {dt}: water in the layer at 1 s {in_layer:.3f}")
         assert in_layer < 0.12, (dt, in_layer)
 
+
 def test_freefall_does_not_follow_round_off_in_the_tank_corners(ti_cpu):
     """The seed's free fall (variant coarse) in a tank of 0.1 x 0.1 m (the block of the test above over the
     shipped eps0 0.3 layer), 60 ms, from the lattice and from the lattice moved by 1e-12 dx (uniform per
@@ -446,16 +455,7 @@ def test_freefall_does_not_follow_round_off_in_the_tank_corners(ti_cpu):
     fall's runs parted by 1.2e-2 dx within the step of 35 ms (CPU against CUDA likewise, docs/performance.md
     "Fourth round"). Measured since every face is taken: 3.7e-11 dx (1.1e-3 dx with the nearest face only);
     bound 1e-6 dx, where one flipped decision moves a particle by 1e-3 dx or more."""
-    from taichi_sph.config import load_config
-    from taichi_sph.isph.solver import ISPHSolver
-    from taichi_sph.scene import build_scene
-
-    narrow = ["tank.size=[0.1, 0.1, 0.7]", "water=[{min: [0.0, 0.0, 0.40], max: [0.10, 0.10, 0.60]}]",
-              "soil.regions=[{min: [0.0, 0.0, 0.20], max: [0.10, 0.10, 0.40], eps0: 0.3, d50: 0.01}]"]
-    cfg = load_config(ROOT / "configs" / "freefall.yaml", variant="coarse", overrides=narrow)
-    scene = build_scene(cfg)
-    solver = ISPHSolver(cfg, scene)
-    solver.initial_diagnostics()
+    cfg, _, solver = _narrow_freefall(0.3)
     start = solver.state()
     moved = dict(start)
     water = start["kind"] == 0
