@@ -19,7 +19,7 @@ configs again after the isph changes of that round, then the free fall timed alo
     python tools/gpu_check.py --out DIR --only parity configs freefall \
         --budget parity=130 configs=300 freefall=100
 
-(at most 530 s of checks, inside the device's 600 s a command)
+(at most 530 s of checks, under ten minutes)
 
 `--budget NAME=SECONDS` sets one check's budget; `--scale` multiplies every budget. The tests and the
 parity cases run four processes at once (each a CPU and a GPU run), the other checks one. `--arch cpu` runs the same sequence on the CPU (a dry run of the
