@@ -29,8 +29,9 @@ def taichi_options(cpu: bool = True) -> dict:
     over the kernel's control-flow graph) took a quarter of a cold compilation and bought no speed here
     (2026-11-28, this 2-core machine, one thread: the coarse free fall's 10 steps from an empty cache 16.0
     -> 12.1 s; its 200 steps 6.9 / 6.8 s, the wcsph dam break to 0.3 s 76.8 / 76.0 s with the pass on /
-    off, warm). Its absence moves the arithmetic at round-off (positions 7e-13 m after 200 steps). GPUs
-    keep it: not measured there."""
+    off, warm; `tools/bench.py --no-jit --sizes S --dims 2 --baseline` against the code before, the same
+    run, 2 threads: isph_porous 118.4 -> 113.7 ms/step, wcsph 2.6 -> 2.3 ms/step). Its absence moves the
+    arithmetic at round-off (positions 7e-13 m after 200 steps). GPUs keep it: not measured there."""
     out = {"offline_cache": True, "offline_cache_file_path": _cache_dir(),
            "offline_cache_max_size_of_files": CACHE_MAX_BYTES}
     if cpu:
