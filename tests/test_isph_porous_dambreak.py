@@ -11,16 +11,16 @@ from taichi_sph.io.hdf5 import RunFile
 
 
 def test_porous_dambreak_runs_with_the_adaptive_step(run_cli, tmp_path):
-    """Measured at dx 1 cm to 2 s (one thread, the shipped options with the suction floor of 6867 Pa):
-    completed, no particle removed, the water volume measure (sum m eps / <rho>) between -0.95 % and
-    +0.51 % of its start at every step, at most 0.10 % of the water isolated in any frame after 0.1 s
-    (before the floor: -0.96..+0.55 %, 0.29 %; with ground density 0.85: -0.64..+1.44 %); at dx 5 mm to
-    2 s with dt auto, which stopped at 1.09 s without the floor: -0.40..+0.38 %, at most 0.33 % isolated
-    (at 3 rho_w g H: -0.40..+0.26 %, 0.19 %; at timestep.cfl 0.15 it stopped at 1.53 s). Bounds: the run completes with no particle lost
-    through the top or a wall, the volume within 2 % at every step (the largest excursion measured over
-    both settings, 1.44 %, with a margin for the two
-    threads' ordering), isolated water below 0.5 % of the water in every frame after the first impact
-    (the acceptance value for the spray)."""
+    """Measured (2026-11-28, one thread; two threads give the same run): at dx 1 cm to 2 s (the shipped
+    options) completed, no particle removed, the water volume measure (sum m eps / <rho>) between -0.85 %
+    and +0.54 % of its start at every step (to 1 s, this test's run: -0.85..+0.41 %), at most 0.10 % of the
+    water isolated in any frame after 0.1 s; at dx 5 mm to 2 s with dt auto (which stopped at 1.09 s
+    before the suction floor): completed, -0.37..+0.36 %, at most 0.21 % isolated. Earlier, before the
+    wall collision's change: -0.95..+0.51 % and 0.10 % at 1 cm, -0.40..+0.38 % and 0.33 % at 5 mm; before
+    the suction floor -0.96..+0.55 %, 0.29 %; with ground density 0.85 -0.64..+1.44 %. Bounds: the run
+    completes with no particle lost through the top or a wall, the volume within 1.2 % at every step
+    (1.4 times the largest excursion measured, 0.85 %), isolated water below 0.5 % of the water in every
+    frame after the first impact (the acceptance value for the spray)."""
     out = tmp_path / "pdb.h5"
     r = run_cli("--config", "configs/porous_dambreak.yaml", "--set", "end_time=1.0",
                 "--out", out, "--no-progress")
@@ -29,7 +29,7 @@ def test_porous_dambreak_runs_with_the_adaptive_step(run_cli, tmp_path):
         assert rf.attrs["status"] == "completed"
         assert int(rf.attrs["removed_particles"]) == 0
         vol = rf.diagnostics()["water_volume"]
-        assert np.all(np.abs(vol / vol[0] - 1.0) < 0.02), (vol.min() / vol[0], vol.max() / vol[0])
+        assert np.all(np.abs(vol / vol[0] - 1.0) < 0.012), (vol.min() / vol[0], vol.max() / vol[0])
         w = rf.kind == 0
         for i in range(rf.n_frames):
             if rf.times[i] < 0.1:
