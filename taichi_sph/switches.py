@@ -78,6 +78,8 @@ class Switches:
     soil: bool | None = _switch((WCSPH,), "the scene has soil particles (eq 35, 37-45)")
     soil_water: bool | None = _switch((WCSPH,), "soil and water together: pore pressure and Biot drag "
                                                 "(eq 46-47)")
+    soil_air: bool | None = _switch((WCSPH,), "soil and air together: Biot drag of eq 46-47 between them "
+                                              "(the soil's conductivity for air wcsph.soil.air_permeability)")
     soil_fixed: bool | None = _switch((WCSPH,), "the whole skeleton is rigid (wcsph.soil.fixed)")
     soil_blocks_fixed: bool | None = _switch((WCSPH,), "some soil particles are held by "
                                                        "soil_blocks[k].fixed")
@@ -128,6 +130,7 @@ class Switches:
                    normalised_density=w.density == "normalised",
                    soil=n_soil > 0,
                    soil_water=n_soil > 0 and n_water > 0,
+                   soil_air=n_soil > 0 and air and cfg.air_conductivity() is not None,
                    soil_fixed=bool(sp.fixed),
                    soil_blocks_fixed=len(held_soil_ids(cfg, scene)) > 0,
                    soil_dilatancy=n_soil > 0 and sp.dilatancy_angle > 0.0)

@@ -195,6 +195,17 @@ class WCSPHCase(_Case):
                   + [blk.bounds(self.dim, self.tank.size)[1][-1] for blk in self.soil_blocks])
         return max((2.0 * g * top) ** 0.5, 1.0e-3)
 
+    def air_conductivity(self) -> float | None:
+        """The soil's conductivity for air (m/s) of the air-soil drag (eq 46 with rho_f the air's):
+        `wcsph.soil.air_permeability`, or k nu_w / nu_a (the same intrinsic permeability K = k nu_w / g);
+        None (no drag) for air of zero viscosity left to the default."""
+        sp = self.wcsph.soil
+        if sp.air_permeability is not None:
+            return sp.air_permeability
+        if self.wcsph.air.viscosity <= 0.0:
+            return None
+        return sp.permeability * self.fluid.viscosity / self.wcsph.air.viscosity
+
     def soil_modulus(self) -> float | None:
         """Constrained modulus M of the soil (Pa) at the largest vertical effective stress of the scene, the
         dry weight of the highest soil top, (1 - n) rho_s |g| top (an upper bound of M where E grows with
@@ -268,6 +279,10 @@ def check_wcsph_fluids(cfg: WCSPHCase) -> None:
             fail(f"water[{k}].porosity", "applies to mode isph only (mode is wcsph_biot)")
     if cfg.fluid.turbulence != "none":
         fail("fluid.turbulence", f"{cfg.fluid.turbulence} is available in mode isph only")
+    if (cfg.air and cfg.soil_blocks and cfg.wcsph.soil.air_permeability is None and cfg.fluid.viscosity <= 0.0
+            and cfg.wcsph.air.viscosity > 0.0):
+        fail("wcsph.soil.air_permeability", "needed with air and soil and fluid.viscosity 0: the default k nu_w "
+             "/ nu_a would stop the air dead in the pores")
     c0, u = cfg.sound_speed(), cfg.expected_speed()
     if cfg.wcsph.water.sound_speed is not None and c0 < 10.0 * u:
         fail("wcsph.water.sound_speed", f"{c0:g} m/s is below 10 x the expected speed {u:.4g} m/s "

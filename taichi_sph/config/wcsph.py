@@ -178,6 +178,11 @@ class WCSPHSoil(Strict):
     alpha: NonNegFloat = 0.001
     #: permeability k of eq 46 (m/s) (hydraulic conductivity)
     permeability: PosFloat = 1.0e-3
+    #: the soil's conductivity for air (m/s): k of eq 46 between soil and air particles, with the air's
+    #: density for rho_f (the seed's air permeability). Default: the same pores as `permeability`, whose
+    #: intrinsic permeability K = k nu_w / g gives K g / nu_a = k nu_w / nu_a (1/15 of k for water and air
+    #: at 20 C); no drag on air of zero viscosity
+    air_permeability: PosFloat | None = None
     #: velocity damping of the soil (1/s): a_s -= damping v_s, for a geostatic stage (0 = off)
     damping: NonNegFloat = 0.0
     #: initial excess pore pressure (consolidation); none by default

@@ -13,7 +13,8 @@ fluid pair terms skip them. Per step:
    damping (`wcsph.soil.fixed`: the skeleton is rigid, its acceleration and drag are zero).
 3. drag passes (`_drag_water_pass`, `_drag_soil_pass`, `_drag_water_after_pass`): the water's mixture momentum
    inside the soil (pore part n under the water's forces, the rest moving with the soil) and eq 46-47
-   between soil and water as pair forces F_ij = -F_ji (`_pair_drag`), implicit per pair (docs/biot.md),
+   between soil and water (and air, with the soil's conductivity for air) as pair forces F_ij = -F_ji
+   (`_pair_drag`), implicit per pair (docs/biot.md),
    written to `adrag` which the next kick adds to the acceleration; their sum over all particles goes to
    /diagnostics/drag_sum (momentum check), the largest to drag_max (summed in the last drag pass).
 
@@ -31,7 +32,7 @@ import taichi as ti
 
 from .. import guard
 from ..config.schema import PORE_WATER_STIFFNESS
-from ..scene import SOIL, WALL, WATER
+from ..scene import AIR, SOIL, WALL, WATER
 from ..sph import kernels, operators, walls
 from ..switches import held_soil_ids
 from . import soil, terms
@@ -49,7 +50,7 @@ class SoilPasses:
     strain, pore pressure, water presence, drag) are one element long in a scene without soil."""
 
     #: fields and host values that carry over from one step to the next (checkpoints, with the solver's)
-    state_fields = ("sig", "eps_p", "pore", "phi_w", "adrag")
+    state_fields = ("sig", "eps_p", "pore", "phi_w", "phi_a", "adrag")
     state_scalars = ("red_s",)
 
     def __init__(self, fl, cfg, scene):
@@ -93,6 +94,9 @@ class SoilPasses:
                             cfg.pore_water_speed())
         self.alpha_s = sp.alpha
         self.g_over_k = fl.g_abs / sp.permeability
+        # the drag between soil and air (eq 46 with the air's density and the soil's conductivity for air)
+        k_air = cfg.air_conductivity()
+        self.g_over_ka = fl.g_abs / k_air if (fl.soil_air and k_air) else 0.0
         self.damping = sp.damping
         # rigid skeleton: no acceleration, no drag on the soil, no soil dt limit
         self.soil_fixed = sw.soil_fixed
@@ -109,6 +113,7 @@ class SoilPasses:
         self.eps_p = ti.field(float, ns)  # accumulated plastic shear strain
         self.pore = ti.field(float, ns)  # pore pressure at soil particles (gauge)
         self.phi_w = ti.field(float, ns)  # water presence sum_w V_j W_ij at soil particles
+        self.phi_a = ti.field(float, ns)  # air presence at soil particles (the same, over the air)
         self.adrag = ti.Vector.field(dim, float, ns)  # drag acceleration of eq 46, added by the kick
         # water acceleration without drag inside the soil (scratch of the drag pass, not carried over)
         self.amix = ti.Vector.field(dim, float, ns)
@@ -130,7 +135,7 @@ class SoilPasses:
         #: per-particle fields the solver reorders with its own when it sorts particles into cells
         self.particle_fields = []
         if fl.has_soil:
-            self.particle_fields = [self.sig, self.eps_p, self.pore, self.phi_w, self.adrag]
+            self.particle_fields = [self.sig, self.eps_p, self.pore, self.phi_w, self.phi_a, self.adrag]
             self.adrag.fill(0.0)
 
     # ------------------------------------------------------------------ kernels
@@ -183,7 +188,7 @@ class SoilPasses:
         drag (coupled scenes); returns their reductions (`nred`: the force pass's, then the drag's)."""
         rs = self._forces_pass(dt)
         rd = ti.Vector.zero(float, self.fl.dim + 1)
-        if ti.static(self.fl.coupled):
+        if ti.static(self.fl.drag_on):
             self._drag_water_pass(dt)
             self._drag_soil_pass(dt)
             rd = self._drag_water_after_pass(dt)
@@ -234,6 +239,7 @@ class SoilPasses:
                 pn = 0.0  # sum_w V_j (p_j - p0) W
                 pd = 0.0  # sum_w V_j W
                 pdw = 0.0  # the walls' share of the support
+                pda = 0.0  # sum_air V_j W
                 for k in range(fl.grid.nbr_count[i]):
                     j = fl.grid.nbr[i, k]
                     sj = fl.s[j]
@@ -245,14 +251,18 @@ class SoilPasses:
                     kj = sj[fl.S_KIND]
                     vj = 0.0
                     dpj = 0.0
-                    if ti.static(fl.coupled):
+                    if ti.static(fl.coupled):  # noqa: SIM102 (compile-time if)
                         if kj == WATER:  # the pore pressure and wetness take the water at i's own place too
                             vj = sj[fl.S_M] / fl.rhof(j)
                             dpj = fl.p[j] - p0
                             wij = vj * kernels.w(r, h, fl.dim)
                             pn += dpj * wij
                             pd += wij
-                        elif kj == WALL:
+                    if ti.static(fl.soil_air):  # noqa: SIM102 (compile-time if)
+                        if kj == AIR:  # the air's presence (its drag's weight), at i's own place too
+                            pda += sj[fl.S_M] / fl.rhof(j) * kernels.w(r, h, fl.dim)
+                    if ti.static(fl.drag_on):  # noqa: SIM102 (compile-time if)
+                        if kj == WALL:
                             pdw += fl.vol0 * kernels.w(r, h, fl.dim)
                     if r2 == 0.0:
                         continue
@@ -312,6 +322,8 @@ class SoilPasses:
                     # it), the gradient at i along it (the mirror image of the excess pressure): p_w - p_i
                     # = rho_w g . dx_n + G_i . dx_t, weighted by phi_w
                     gradp = gp_w - dp * gv_w + pw * fl.rho_w * g_n
+                if ti.static(fl.soil_air):
+                    self.phi_a[i] = ti.min(pda / ti.max(1.0 - pdw, 0.5), 1.0)
                 # the walls' equilibrium gradient across their faces: the buoyant unit weight b_fac rho g
                 # where water fills the pores, whose pressure the pore term extrapolates
                 accs -= b_fac * g_n
@@ -357,6 +369,18 @@ class SoilPasses:
         return movable
 
     @ti.func
+    def _drags(self, i):
+        """Whether fluid particle i feels the soil's drag: water in a coupled scene, air where the soil has
+        a conductivity for air (`soil_air`)."""
+        fl = self.fl
+        out = False
+        if ti.static(fl.coupled):
+            out = fl.kind[i] == WATER
+        if ti.static(fl.soil_air):
+            out = out or fl.kind[i] == AIR
+        return out
+
+    @ti.func
     def _drag_water_pass(self, dt):
         """Water side of the mixture momentum (docs/biot.md), before the drag. The water particles fill the
         whole volume, so inside the soil a water particle carries the volume-averaged velocity u = n v_f +
@@ -371,7 +395,7 @@ class SoilPasses:
         ti.loop_config(serialize=fl.serial)
         for m in range(fl.n if ti.static(fl.exact_grid) else fl.n_moving[None]):  # solver.moving_ids
             i = fl.moving_ids[m]
-            if fl.fmask[i] == 1 and fl.kind[i] == WATER:
+            if fl.fmask[i] == 1 and self._drags(i):
                 xi = fl.xf(i)
                 ai = fl.a[i]
                 wsum = 0.0
@@ -416,15 +440,26 @@ class SoilPasses:
         q*_ij = (u_i + dt A_i) - (v_j + dt a_j), lambda_ij = n_i (phi_s,i g / k + C_s,j phi_w,j) (the rate
         at which the drag closes u - v_s; C_s,j = 0 for a held skeleton). Both sides evaluate this
         function with the same (water, soil) arguments, so F_ij = -F_ji to rounding. w_ij is V_j W_ij (zero
-        beyond the support: no force), which the caller has at hand (`_soil_weight`)."""
+        beyond the support: no force), which the caller has at hand (`_soil_weight`). An air particle i
+        (`soil_air`) takes the same with the air's density for rho_w, the soil's conductivity for air k_a for
+        k and the air's presence phi_a,j for phi_w,j (eq 46 with rho_f the air's)."""
         fl = self.fl
         wm = self.wmix[i]
         rhoj = fl.rhof(j)
+        # the fluid's constants: water's, or the air's (its density, the soil's conductivity for air)
+        c_f = self.g_over_k
+        rho_f = fl.rho_w
+        phi_f = self.phi_w[j]
+        if ti.static(fl.soil_air):  # noqa: SIM102 (compile-time if)
+            if fl.kind[i] == AIR:
+                c_f = self.g_over_ka
+                rho_f = fl.rho_a
+                phi_f = self.phi_a[j]
         cs = 0.0
         if self._movable(j):
-            cs = (1.0 - rhoj / self.rho_g) * fl.rho_w / rhoj * self.g_over_k * self.phi_w[j]
-        lam = wm[0] * (wm[2] * self.g_over_k + cs)
-        c = fl.m[i] * wm[0] * self.g_over_k * wm[1] * w_ij
+            cs = (1.0 - rhoj / self.rho_g) * rho_f / rhoj * c_f * phi_f
+        lam = wm[0] * (wm[2] * c_f + cs)
+        c = fl.m[i] * wm[0] * c_f * wm[1] * w_ij
         qs = (fl.v[i] + dt * self.amix[i]) - (fl.v[j] + dt * fl.a[j])
         return -c / (1.0 + dt * lam) * qs
 
@@ -452,7 +487,7 @@ class SoilPasses:
                 fsum = ti.Vector.zero(float, fl.dim)
                 for k in range(fl.nbr_fluid(i), fl.grid.nbr_count[i]):  # water and air
                     j = fl.grid.nbr[i, k]
-                    if fl.kind[j] == WATER:
+                    if self._drags(j):
                         w = self._soil_weight(fl.xf(j), i)
                         if w > 0.0:
                             fsum -= self._pair_drag(j, i, w, dt)
@@ -477,7 +512,7 @@ class SoilPasses:
                 f = self.fdrag[i]
                 tot += f
                 ti.atomic_max(big, f.norm())
-            if fl.fmask[i] == 1 and fl.kind[i] == WATER:
+            if fl.fmask[i] == 1 and self._drags(i):
                 fsum = ti.Vector.zero(float, fl.dim)
                 wsum = 0.0
                 dbar = ti.Vector.zero(float, fl.dim)
@@ -509,7 +544,7 @@ class SoilPasses:
                                          "soil position, velocity, density or stress")
         fl.last["kinetic_energy"] += float(r[0])
         fl.last["max_speed"] = max(fl.last["max_speed"], float(r[1]))
-        if fl.coupled:
+        if fl.drag_on:
             r = red[_NRED_S:]
             fl.last["drag_sum"] = float(np.linalg.norm(r[:-1]))
             fl.last["drag_max"] = float(r[-1])

@@ -176,7 +176,9 @@ class WCSPHSolver(SolverCommon):
         self.n_soil = scene.count(SOIL)
         self.has_soil = sw.soil
         self.coupled = sw.soil_water  # pore pressure and drag
-        if self.coupled:  # the drag's momentum check (soil_step.py)
+        self.soil_air = sw.soil_air  # drag between soil and air
+        self.drag_on = self.coupled or self.soil_air
+        if self.drag_on:  # the drag's momentum check (soil_step.py)
             self.diagnostic_names = (*self.diagnostic_names, "drag_sum", "drag_max")
 
         self.h_lo = H_MIN * self.h0 if self.variable_h else self.h0
@@ -998,7 +1000,10 @@ class WCSPHSolver(SolverCommon):
         order = self._id_order()
         kind = self.kind.to_numpy()[order]
         v = self.v.to_numpy()[order]
-        vel = v + 0.5 * self.dt_prev * self.a.to_numpy()[order]
+        acc = self.a.to_numpy()[order]
+        if self.has_soil:  # the kick's acceleration includes the drag (soil_step.py), the force pass's does not
+            acc = acc + self.soil.adrag.to_numpy()[order]
+        vel = v + 0.5 * self.dt_prev * acc
         wall = kind == WALL
         vel[wall] = v[wall]  # zero, or a moving obstacle's velocity
         rho = self.rho.to_numpy()[order]
