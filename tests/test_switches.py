@@ -51,6 +51,7 @@ WCSPH_FLAGS = {
     "normalised_density": lambda s: s.normalised,
     "soil": lambda s: s.has_soil,
     "soil_water": lambda s: s.coupled,
+    "soil_air": lambda s: s.soil_air,
     "soil_fixed": lambda s: s.soil.soil_fixed,
     "soil_blocks_fixed": lambda s: s.soil.block_fixed,
     "soil_dilatancy": lambda s: s.soil.dilatant,
