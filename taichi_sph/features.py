@@ -95,4 +95,6 @@ def _wcsph_features(cfg, sw: Switches) -> dict:
         "walls": cfg.tank.boundary,
         "beta_max": w.beta_max,
         "release_velocity": w.release_velocity,
+        # the soil's conductivity for air (m/s) where air drags on soil (switch soil_air)
+        "air_conductivity": cfg.air_conductivity() if sw.soil_air else None,
     }}
