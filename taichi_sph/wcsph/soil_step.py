@@ -339,7 +339,7 @@ class SoilPasses:
                 if held:
                     acc = ti.Vector.zero(float, fl.dim)
                 fl.a[i] = acc
-                vs = vi + 0.5 * dt * acc
+                vs = vi + 0.5 * dt * (acc + self.adrag[i])  # the drag of the step before, as the fluid's
                 s2 = vs.dot(vs)
                 ke += 0.5 * si[fl.S_M] * s2
                 ti.atomic_max(vmax, ti.sqrt(s2))

@@ -853,7 +853,11 @@ class WCSPHSolver(SolverCommon):
                 rho = ti.cast(rho64, float)
                 # reductions
                 voli = mi / rho
-                vs = vi + 0.5 * dt * acc  # synchronised velocity at this time
+                # synchronised velocity at this time; with soil the drag of the step before (this step's
+                # comes after this pass), as the kick and the frames take it
+                vs = vi + 0.5 * dt * acc
+                if ti.static(self.has_soil):
+                    vs += 0.5 * dt * self.soil.adrag[i]
                 s2 = vs.dot(vs)
                 ke += 0.5 * mi * s2
                 ti.atomic_max(vmax, ti.sqrt(s2))
