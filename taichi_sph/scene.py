@@ -295,6 +295,17 @@ def soil_block_index(cfg, pts: np.ndarray) -> np.ndarray:
     return out
 
 
+def cut_to_soil(cfg, box, pts: np.ndarray) -> np.ndarray:
+    """A fluid block's lattice points `pts` kept by its `inside_soil` (the pores only: its points inside soil
+    blocks; not empty, a config check for water) or `outside_soil` (the open space only); all of them
+    without either (mode isph's blocks have neither)."""
+    if getattr(box, "inside_soil", False):
+        return pts[soil_block_index(cfg, pts) >= 0]
+    if getattr(box, "outside_soil", False):
+        return pts[soil_block_index(cfg, pts) < 0]
+    return pts
+
+
 def build_scene(cfg) -> Scene:
     """Particles for a validated Config (water blocks, tank walls, obstacles)."""
     dim, dx = cfg.dim, cfg.dx
@@ -305,11 +316,7 @@ def build_scene(cfg) -> Scene:
     water_v = np.zeros((0, dim))
     for box in cfg.water:
         # water in ground of porosity eps fills its pores: spacing dx / eps^(1/dim), mass unchanged
-        pts = porous_lattice(box.min, box.max, dx, box.porosity)
-        if getattr(box, "inside_soil", False):  # pore water only: the block's points inside soil blocks
-            pts = pts[soil_block_index(cfg, pts) >= 0]  # not empty: config check
-        elif getattr(box, "outside_soil", False):  # open water only: the ground's pores stay dry
-            pts = pts[soil_block_index(cfg, pts) < 0]
+        pts = cut_to_soil(cfg, box, porous_lattice(box.min, box.max, dx, box.porosity))
         pts = pts[box.below_table(pts)]  # a water table (`water[k].table`) cuts the block's top
         if box.jitter > 0:
             pts = pts + np.random.default_rng(len(water)).uniform(-box.jitter, box.jitter, pts.shape) * dx
@@ -337,7 +344,7 @@ def build_scene(cfg) -> Scene:
     water, water_v = water[keep], water_v[keep]
     air = np.zeros((0, dim))
     for box in getattr(cfg, "air", []):  # air blocks displace the water they overlap
-        pts = lattice_in_box(box.min, box.max, dx)
+        pts = cut_to_soil(cfg, box, lattice_in_box(box.min, box.max, dx))
         pts = pts[remove_overlaps(pts, air, 0.5 * dx) & remove_overlaps(pts, wall, 0.5 * dx)]
         air = np.concatenate([air, pts])
     keep = remove_overlaps(water, air, 0.5 * dx)

@@ -35,7 +35,8 @@ SECTIONS = [("_Case", "top level, every case"), ("ISPHCase", "top level, mode is
 SECTIONS += [("WCSPH", "wcsph"), ("WCSPHWater", "wcsph.water"), ("WCSPHAir", "wcsph.air"),
              ("ArtificialViscosity", "wcsph.artificial_viscosity")]
 SECTIONS += [("Checkpoint", "checkpoint"), ("Metric", "metrics[k]")]
-SECTIONS += [("WaterBlock", "water[k] (besides min and max)"), ("Obstacle", "obstacles[k] (besides min and max)"),
+SECTIONS += [("SoilSideBlock", "water[k] and air[k] in mode wcsph_biot (besides min and max)"),
+             ("WaterBlock", "water[k] (besides min, max, inside_soil and outside_soil)"), ("Obstacle", "obstacles[k] (besides min and max)"),
              ("ObstacleMotion", "obstacles[k].motion")]
 SECTIONS += [("WCSPHSoil", "wcsph.soil"), ("SoilStartFrom", "wcsph.soil.start_from"), ("InflowSource", "inflow[k]")]
 SECTIONS += [("Soil", "soil"), ("Shape", "soil.regions[k] and soil_blocks[k]: a box or a mound"),

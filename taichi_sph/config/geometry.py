@@ -83,7 +83,30 @@ class Shape(Strict):
         inside(*self.bounds(dim, tank_size), tank_size, key)
 
 
-class WaterBlock(Box):
+class SoilSideBlock(Box):
+    """A block of fluid particles (m) that mode wcsph_biot may cut to the soil blocks' inside or outside."""
+
+    #: mode wcsph_biot: keep only the block's lattice points inside soil blocks, so that the block
+    #: fills the pores of the ground up to its top (a levee saturated up to a phreatic level, or the air
+    #: in a dry levee's pores) and leaves the open ground above and beside the soil empty; needs
+    #: `soil_blocks`
+    inside_soil: bool = False
+    #: mode wcsph_biot: keep only the block's lattice points outside soil blocks (open water beside
+    #: ground whose pores stay dry: a river against a dry levee); needs `soil_blocks`
+    outside_soil: bool = False
+
+    @model_validator(mode="after")
+    def _one_soil_side(self):
+        if self.inside_soil and self.outside_soil:
+            fail("outside_soil", "a block fills the soil's pores (inside_soil) or the space outside it, not both")
+        return self
+
+
+class AirBlock(SoilSideBlock):
+    """A block of air particles (m, mode wcsph_biot); they displace the water they overlap."""
+
+
+class WaterBlock(SoilSideBlock):
     """A block of water particles (m)."""
 
     #: fill the block at the density of water in ground of this porosity: lattice spacing
@@ -102,23 +125,10 @@ class WaterBlock(Box):
     #: height, rho_w |g| (start_head - height) (m), instead of the weight of the fluid above them (a
     #: plenum under a baffle or a permeable base, fed from a reservoir at that level); default none
     start_head: float | None = None
-    #: mode wcsph_biot: keep only the block's lattice points inside soil blocks, so that the block
-    #: fills the pores of the ground up to its top (a levee saturated up to a phreatic level) and
-    #: leaves the open ground above and beside the soil dry; needs `soil_blocks`
-    inside_soil: bool = False
-    #: mode wcsph_biot: keep only the block's lattice points outside soil blocks (open water beside
-    #: ground whose pores stay dry: a river against a dry levee); needs `soil_blocks`
-    outside_soil: bool = False
     #: a water table [[x, z], ...] (m): keep only the block's lattice points at or below this polyline,
     #: heights z at positions x along the first axis, linear between points and level beyond the ends
     #: (a levee's phreatic line that falls from the river to the landside floor); default none (the box)
     table: Optional[list[list[float]]] = None
-
-    @model_validator(mode="after")
-    def _one_soil_side(self):
-        if self.inside_soil and self.outside_soil:
-            fail("outside_soil", "a block fills the soil's pores (inside_soil) or the space outside it, not both")
-        return self
 
     @model_validator(mode="after")
     def _table_points(self):

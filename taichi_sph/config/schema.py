@@ -21,6 +21,7 @@ from pydantic import Discriminator, Tag, TypeAdapter, model_validator
 
 from .base import NonNegFloat, PosFloat, PosInt, Strict, fail
 from .geometry import (  # noqa: F401  (re-exported: `from taichi_sph.config.schema import ...`)
+    AirBlock,
     Box,
     Obstacle,
     ObstacleMotion,
@@ -176,8 +177,9 @@ class WCSPHCase(_Case):
 
     #: solver: isph (incompressible, PPE) or wcsph_biot (weakly compressible mixture)
     mode: Literal["wcsph_biot"]
-    #: air blocks (m, fields as for `water`); they displace the water they overlap
-    air: list[Box] = []
+    #: air blocks (m): min, max and, as water blocks, inside_soil / outside_soil; they displace the water
+    #: they overlap
+    air: list[AirBlock] = []
     #: options of mode wcsph_biot
     wcsph: WCSPH = WCSPH()
     #: soil particle blocks (m): a lattice of spacing dx overlapping any water block

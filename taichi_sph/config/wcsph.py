@@ -321,21 +321,23 @@ class WCSPH(Strict):
 
 def check_soil_blocks(cfg) -> None:
     """Soil blocks have `dim` values and lie in the tank; water blocks are needed unless there is soil;
-    water inside soil needs soil to fill; inflows lie in the tank (a case of mode wcsph_biot)."""
+    water or air inside soil needs soil to fill, outside it soil to keep out of; inflows lie in the tank (a
+    case of mode wcsph_biot)."""
     if not cfg.water and not cfg.soil_blocks:
         fail("water", "needs at least one water block (mode wcsph_biot may have soil blocks instead)")
     for k, blk in enumerate(cfg.soil_blocks):
         blk.check_in_tank(cfg.dim, cfg.tank.size, f"soil_blocks[{k}]")
-    for k, block in enumerate(cfg.water):
-        if block.outside_soil and not cfg.soil_blocks:
-            fail(f"water[{k}].outside_soil", "needs soil_blocks (the water is kept out of them)")
-        if block.inside_soil:
-            if not cfg.soil_blocks:
-                fail(f"water[{k}].inside_soil", "needs soil_blocks (the water fills their pores)")
-            bounds = [blk.bounds(cfg.dim, cfg.tank.size) for blk in cfg.soil_blocks]
-            if not any(all(a < sh and b > sl for a, b, sl, sh in zip(block.min, block.max, slo, shi))
-                       for slo, shi in bounds):
-                fail(f"water[{k}].inside_soil", "the block overlaps no soil block (no pore to fill)")
+    for name, blocks in (("water", cfg.water), ("air", cfg.air)):
+        for k, block in enumerate(blocks):
+            if block.outside_soil and not cfg.soil_blocks:
+                fail(f"{name}[{k}].outside_soil", f"needs soil_blocks (the {name} is kept out of them)")
+            if block.inside_soil:
+                if not cfg.soil_blocks:
+                    fail(f"{name}[{k}].inside_soil", f"needs soil_blocks (the {name} fills their pores)")
+                bounds = [blk.bounds(cfg.dim, cfg.tank.size) for blk in cfg.soil_blocks]
+                if not any(all(a < sh and b > sl for a, b, sl, sh in zip(block.min, block.max, slo, shi))
+                           for slo, shi in bounds):
+                    fail(f"{name}[{k}].inside_soil", "the block overlaps no soil block (no pore to fill)")
     for k, src in enumerate(cfg.inflow):
         check_box(src, cfg.dim, cfg.tank.size, f"inflow[{k}]")
         if src.level_probe is not None:
