@@ -50,7 +50,9 @@ class SoilPasses:
     strain, pore pressure, water presence, drag) are one element long in a scene without soil."""
 
     #: fields and host values that carry over from one step to the next (checkpoints, with the solver's)
-    state_fields = ("sig", "eps_p", "pore", "phi_w", "phi_a", "adrag")
+    #: (phi_a, the air's presence, is set by the force pass before the drag reads it: not state, so that
+    #: checkpoints written before it existed still load)
+    state_fields = ("sig", "eps_p", "pore", "phi_w", "adrag")
     state_scalars = ("red_s",)
 
     def __init__(self, fl, cfg, scene):
