@@ -65,8 +65,8 @@ def test_darcy_flux_of_water_and_air_through_rigid_soil(run_cli, tmp_path, cfl):
     for air; the air's conductivity from the same intrinsic permeability, k nu_w / nu_a): driven by gravity
     along a periodic box of rigid soil, each fluid's flux is its conductivity (Darcy, unit gradient).
     Measured in the rows more than one kernel support from the water-air interface, the floor and the
-    air's free top (where the kernel cut lowers the soil's presence and the drag with it: a free top row
-    moves at 1.27 k): water 1.0002-1.0003 k, air 1.0002-1.0003 k_a, at cfl 0.25 and 0.125 (the pair drag
+    air's free top (where the kernel cut lowers the soil's presence and the drag with it: the air's top
+    row moves at 1.27 k_a): water 1.0002-1.0003 k, air 1.0002-1.0003 k_a, at cfl 0.25 and 0.125 (the pair drag
     is implicit: its steady state does not depend on dt). Bound 0.1 %. Before the air dragged on the soil
     it fell freely (g t = 0.05 m/s at 5 ms, 700 k_a); before the frames' velocity took the drag into its
     half-step the water read 1.9 k at cfl 0.25 (the half step's 0.5 dt g)."""
