@@ -204,6 +204,17 @@ def test_rigid_levee_seepage_dupuit(run_cli, tmp_path):
     assert np.abs(q - 1).max() < 0.10, q
 
 
+#: a 2D scene with one mound of soil (toe 0.2-0.8 m, crest 0.45-0.55 m, 0.1 m high), for the blocks' cuts
+_MOUND = """
+mode: wcsph_biot
+dim: 2
+dx: 0.01
+end_time: 0.01
+tank: {size: [1.0, 0.2]}
+soil_blocks:
+  - {shape: mound, toe: [0.2, 0.8], crest: [0.45, 0.55], bottom: 0.0, top: 0.1}"""
+
+
 def test_water_table_cuts_a_block_to_a_phreatic_line(tmp_path):
     """`water[k].table`: a block keeps its lattice points at or below the polyline. Reference: the area
     under the line (a levee's pore water below a falling phreatic line, the river level beside it) over
@@ -213,14 +224,7 @@ def test_water_table_cuts_a_block_to_a_phreatic_line(tmp_path):
     from taichi_sph.scene import WATER, build_scene
 
     cfg_path = tmp_path / "table.yaml"
-    cfg_path.write_text("""
-mode: wcsph_biot
-dim: 2
-dx: 0.01
-end_time: 0.01
-tank: {size: [1.0, 0.2]}
-soil_blocks:
-  - {shape: mound, toe: [0.2, 0.8], crest: [0.45, 0.55], bottom: 0.0, top: 0.1}
+    cfg_path.write_text(_MOUND + """
 water:
   - {min: [0.0, 0.0], max: [0.9, 0.06], table: [[0.3, 0.06], [0.7, 0.0]]}
 """)
@@ -243,14 +247,7 @@ def test_air_blocks_cut_to_the_soil(tmp_path):
     from taichi_sph.scene import AIR, build_scene, soil_block_index
 
     cfg_path = tmp_path / "air.yaml"
-    cfg_path.write_text("""
-mode: wcsph_biot
-dim: 2
-dx: 0.01
-end_time: 0.01
-tank: {size: [1.0, 0.2]}
-soil_blocks:
-  - {shape: mound, toe: [0.2, 0.8], crest: [0.45, 0.55], bottom: 0.0, top: 0.1}
+    cfg_path.write_text(_MOUND + """
 water:
   - {min: [0.0, 0.0], max: [0.2, 0.05]}
 air:
