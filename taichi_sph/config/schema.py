@@ -281,8 +281,7 @@ def check_wcsph_fluids(cfg: WCSPHCase) -> None:
             fail(f"water[{k}].porosity", "applies to mode isph only (mode is wcsph_biot)")
     if cfg.fluid.turbulence != "none":
         fail("fluid.turbulence", f"{cfg.fluid.turbulence} is available in mode isph only")
-    if (cfg.air and cfg.soil_blocks and cfg.wcsph.soil.air_permeability is None and cfg.fluid.viscosity <= 0.0
-            and cfg.wcsph.air.viscosity > 0.0):
+    if cfg.air and cfg.soil_blocks and cfg.air_conductivity() == 0.0:  # the default with water of no viscosity
         fail("wcsph.soil.air_permeability", "needed with air and soil and fluid.viscosity 0: the default k nu_w "
              "/ nu_a would stop the air dead in the pores")
     c0, u = cfg.sound_speed(), cfg.expected_speed()

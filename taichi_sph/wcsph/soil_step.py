@@ -50,8 +50,8 @@ class SoilPasses:
     strain, pore pressure, water presence, drag) are one element long in a scene without soil."""
 
     #: fields and host values that carry over from one step to the next (checkpoints, with the solver's)
-    #: (phi_a, the air's presence, is set by the force pass before the drag reads it: not state, so that
-    #: checkpoints written before it existed still load)
+    #: (phi_a, the air's presence, is scratch as amix and wmix: set by the force pass before the drag reads
+    #: it in the same launch, neither state nor reordered with the particles)
     state_fields = ("sig", "eps_p", "pore", "phi_w", "adrag")
     state_scalars = ("red_s",)
 
@@ -115,7 +115,7 @@ class SoilPasses:
         self.eps_p = ti.field(float, ns)  # accumulated plastic shear strain
         self.pore = ti.field(float, ns)  # pore pressure at soil particles (gauge)
         self.phi_w = ti.field(float, ns)  # water presence sum_w V_j W_ij at soil particles
-        self.phi_a = ti.field(float, ns)  # air presence at soil particles (the same, over the air)
+        self.phi_a = ti.field(float, ns)  # air presence at soil particles (the same, over the air; scratch)
         self.adrag = ti.Vector.field(dim, float, ns)  # drag acceleration of eq 46, added by the kick
         # water acceleration without drag inside the soil (scratch of the drag pass, not carried over)
         self.amix = ti.Vector.field(dim, float, ns)
@@ -137,7 +137,7 @@ class SoilPasses:
         #: per-particle fields the solver reorders with its own when it sorts particles into cells
         self.particle_fields = []
         if fl.has_soil:
-            self.particle_fields = [self.sig, self.eps_p, self.pore, self.phi_w, self.phi_a, self.adrag]
+            self.particle_fields = [self.sig, self.eps_p, self.pore, self.phi_w, self.adrag]
             self.adrag.fill(0.0)
 
     # ------------------------------------------------------------------ kernels
