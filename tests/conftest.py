@@ -108,7 +108,7 @@ def surge_front_series(path, a):
 
 # The experiments' release delay in T = t sqrt(2 g / a): the time shift that best fits both Martin &
 # Moyce series (and Koshizuka & Oka) over T in [1, 3] with the two solver modes at dx = a / 40, which
-# agree with each other within 0.8 % there (best fits 0.265-0.29; docs/isph.md, "Dam-break front").
+# agree with each other within 1.8 % there (best fits 0.265-0.29; docs/isph.md, "Dam-break front").
 # The simulations release the column instantly; the experiments' fronts trail them by this constant
 # delay, 10-15 ms at the experiments' scale.
 RELEASE_DELAY_T = 0.27

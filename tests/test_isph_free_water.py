@@ -130,7 +130,7 @@ def test_dambreak_front_martin_moyce(run_cli, tmp_path):
     wall pressure, 2026-11-27; before it +18.5 / +16.4 % at T = 1.2, +6.0..+13.1 % after, -5.1 to +2.6 %;
     the same to 0.1 point on 2026-11-28, after the wall collision's change). The two modes agree within
     2.2 % over T in [1, 3] (wcsph_biot / isph 0.996-1.021, 2026-11-28; 1.001-1.034 before the isph
-    changes of 2026-11-27; 1.003-1.014 at dx = a / 40), and both lead the experiment by
+    changes of 2026-11-27; 1.005-1.018 at dx = a / 40, 2026-11-28), and both lead the experiment by
     the same amount: the lead is the experiment's release, not either scheme. Bounds = measured + ~1.5
     points: the front leads both series (it may not fall behind an instantly released column's), by
     < 21 % for T < 1.5 and < 14.5 % after; within 8 % once the release delay is taken out; modes within

@@ -668,7 +668,7 @@ DIAGNOSES = {
                    "transient (the speed bound is meant after 5 s: the full setting).",
     "dambreak": "the experiments' fronts trail the instantly released column by a constant delay (a shift of "
                 "0.27 in T fits both Martin & Moyce series within 4 % at a/40), so the error against the raw data "
-                "does not go to zero with dx. The two modes agree within 0.8 % at a/40 (docs/isph.md, "
+                "does not go to zero with dx. The two modes agree within 1.8 % at a/40 (docs/isph.md, "
                 "\"Dam-break front\").",
     "terzaghi": "the run decays a little slower than c_v says (order 0.5-1): the drained face is a "
                 "kernel-wide zone where the drag fades (about one smoothing length more drainage path), and "
