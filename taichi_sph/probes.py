@@ -38,6 +38,10 @@ Each quantity uses the cubic-spline kernel of the solver (support 2.4 dx, h = 1.
 - water_depth (m): water standing on the ground at a point's column, the water level on the vertical
   line from `point` less the soil top in that column (as soil_level, for a column dx wide), 0 when
   the water surface is at or below it (flow over a crest).
+- water_front (m): the largest x of the active water particles inside the box, the box's low x when it
+  holds none. A wetting front's foot in a levee (a box along the floor, one and a half spacings high):
+  the farthest pore water, as `failure.wetting_front` reads it from the frames. It follows single
+  particles; docs/levee.md says how far a front's tip scatters.
 """
 
 from __future__ import annotations
@@ -60,7 +64,7 @@ SURFACE_FRACTION = 0.5
 SOLID_FREE_FRACTION = 0.25
 
 _UNITS = {"pressure": "Pa", "water_level": "m", "water_volume": "m^3", "velocity": "m/s", "soil_level": "m",
-          "plastic_strain": "1", "water_depth": "m"}
+          "plastic_strain": "1", "water_depth": "m", "water_front": "m"}
 
 
 def probe_unit(kind: str, dim: int) -> str:
@@ -256,6 +260,13 @@ def water_depth(point: Sequence[float], arrays: Mapping[str, np.ndarray], dx: fl
     return max(water_level(point, arrays, dx) - ground, 0.0)
 
 
+def water_front_in_box(lo: Sequence[float], hi: Sequence[float], arrays: Mapping[str, np.ndarray]) -> float:
+    """Largest x (m) of the active water particles inside the box; the box's low x when there are none."""
+    pos = np.asarray(arrays["position"], dtype=float)
+    sel = _water(arrays) & _in_box(pos, lo, hi)
+    return float(pos[sel, 0].max()) if sel.any() else float(lo[0])
+
+
 def evaluate(probe, arrays: Mapping[str, np.ndarray], dx: float):
     """Value of one probe (a config `Probe`): a float, or a (dim,) array for velocity."""
     if probe.type == "pressure":
@@ -272,6 +283,8 @@ def evaluate(probe, arrays: Mapping[str, np.ndarray], dx: float):
         return max_plastic_strain_in_box(probe.box.min, probe.box.max, arrays)
     if probe.type == "water_depth":
         return water_depth(probe.point, arrays, dx)
+    if probe.type == "water_front":
+        return water_front_in_box(probe.box.min, probe.box.max, arrays)
     raise ValueError(f"unknown probe type {probe.type!r}")
 
 

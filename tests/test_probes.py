@@ -211,3 +211,24 @@ def test_plastic_strain_and_water_depth_probes():
     assert water_depth([0.21, 0.0], arrays, DX) == pytest.approx(0.06, abs=0.05 * DX)
     # water only in the pores, its table 4 cm under the surface: nothing stands on the ground
     assert water_depth([0.21, 0.0], _sand_bed(top=0.2, water_top=0.16), DX) == 0.0
+
+
+def test_water_front_reads_the_farthest_pore_water_in_its_box():
+    """water_front: the largest x of the water inside the box (a wetting front's foot), whatever soil or
+    wall stands farther; the box's low x when it holds no water. Exact: it picks a particle's place."""
+    from taichi_sph.probes import water_front_in_box
+
+    arrays = _sand_bed(top=0.2, water_top=0.1)  # soil on [0, L] x [0, 0.2], pore water below 0.1
+    pos, kind, active = arrays["position"], arrays["kind"], arrays["active"]
+    front = pos[kind == 0, 0].max()  # L - dx / 2 on the lattice
+    assert water_front_in_box([0.0, 0.0], [1.0, 1.5 * DX], arrays) == front
+    # a wetting front half way: take away the pore water beyond 0.2 m; the soil beyond stays
+    active[(kind == 0) & (pos[:, 0] > 0.2)] = False
+    assert water_front_in_box([0.0, 0.0], [1.0, 1.5 * DX], arrays) == pytest.approx(0.19)
+    # one particle run ahead along the floor counts (the probe follows single particles)
+    k = int(np.flatnonzero((kind == 0) & (pos[:, 0] > 0.3) & (pos[:, 1] < DX))[0])
+    active[k] = True
+    assert water_front_in_box([0.0, 0.0], [1.0, 1.5 * DX], arrays) == pos[k, 0]
+    # a box above the floor row leaves it out; a box without water reads its low x
+    assert water_front_in_box([0.0, 0.04], [1.0, 0.06], arrays) == pytest.approx(0.19)
+    assert water_front_in_box([0.25, 0.15], [1.0, 0.3], arrays) == 0.25

@@ -18,7 +18,7 @@ ImageField = Literal["speed", "pressure", "density", "kind", "porosity", "veloci
 ProbeName = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", max_length=64)]
 #: the geometry each probe type reads
 PROBE_GEOMETRY = {"pressure": "point", "water_level": "point", "water_volume": "box", "velocity": "box",
-                  "soil_level": "box", "plastic_strain": "box", "water_depth": "point"}
+                  "soil_level": "box", "plastic_strain": "box", "water_depth": "point", "water_front": "box"}
 
 
 class Images(Strict):
@@ -78,12 +78,14 @@ class Probe(Strict):
     #: water surface on the vertical line that rises from `point` (m); water_volume: water inside
     #: `box` (m^3, m^2 in 2D); velocity: mean velocity of the water inside `box` (m/s, dim components);
     #: soil_level: mean top of the soil over `box`'s columns (m); plastic_strain: largest plastic strain
-    #: of the soil in `box`; water_depth: water standing on the ground at `point`'s column (m)
+    #: of the soil in `box`; water_depth: water standing on the ground at `point`'s column (m);
+    #: water_front: the farthest water particle along +x inside `box` (m; a wetting front's foot)
     type: Literal["pressure", "water_level", "water_volume", "velocity", "soil_level", "plastic_strain",
-                  "water_depth"]
-    #: location (m), dim values, inside the tank (types pressure and water_level)
+                  "water_depth", "water_front"]
+    #: location (m), dim values, inside the tank (types pressure, water_level and water_depth)
     point: Optional[list[float]] = None
-    #: region (m), inside the tank (types water_volume and velocity)
+    #: region (m), inside the tank (types water_volume, velocity, soil_level, plastic_strain and
+    #: water_front)
     box: Optional[Box] = None
     #: simulated seconds between samples (default: output.every); sampled at the first step at or
     #: after each multiple, and at t = 0
