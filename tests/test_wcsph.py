@@ -279,9 +279,10 @@ def test_bubble_rises_and_cohesion_keeps_it_together(run_cli, tmp_path):
 
     - Start: air density = gas EOS (eq 39-40, adiabatic) at 100 kPa plus the water above it; checked
       against the particle's depth within 1 % (the bubble's own height, 6 cm of water, is 0.42 % in density).
-    - The air centroid rises (measured 5.1 cm and 4.7 cm in 0.2 s; bound 2 cm, against a sinking or
-      stuck bubble).
-    - At 0.2 s: 4 pieces without cohesion, 1 with it (the seed: fig 8 breaks up, fig 9 stays in two).
+    - The air centroid rises (measured 6.0 cm and 4.9 cm in 0.2 s since XSPH sums within a material,
+      5.3 / 4.7 cm before, docs/wcsph.md; bound 2 cm, against a sinking or stuck bubble).
+    - At 0.2 s: 2 pieces without cohesion, 1 with it (3 / 1 before; the seed: fig 8 breaks up, fig 9
+      stays in two).
     """
     pieces, rise = {}, {}
     for coh in (0, 200):

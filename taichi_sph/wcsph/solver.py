@@ -807,8 +807,11 @@ class WCSPHSolver(SolverCommon):
                                         g_j[d] = sj[self.S_G + d]
                                     drho -= 0.5 * (g_old + g_j).dot(-rij)
                                 dif += 2.0 * drho * (-dwdr / r) * vj
-                        if ti.static(self.xsph_on):
-                            xs += terms.xsph(mj, si[self.S_RHO], sj[self.S_RHO], vij, wij)
+                        # XSPH within the particle's own material: across the 800:1 jump it would move an
+                        # air particle with the water around it, unseen by the continuity and the walls
+                        if ti.static(self.xsph_on):  # noqa: SIM102 (compile-time if)
+                            if kj == ki:
+                                xs += terms.xsph(mj, si[self.S_RHO], sj[self.S_RHO], vij, wij)
                         rhoj = qj[self.Q_RHO]
                         prj = qj[self.Q_PR]
                         same = True

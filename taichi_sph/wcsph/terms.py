@@ -48,5 +48,6 @@ def cohesion(coef, m_j, gw):
 @ti.func
 def xsph(m_j, rho_i, rho_j, vij, w_ij):
     """XSPH correction eq 53 (Monaghan's form): -(m_j / rho_ij) vij W_ij, rho_ij = (rho_i + rho_j) / 2;
-    multiplied by eps_XSPH and added to the velocity a particle moves with."""
+    multiplied by eps_XSPH and added to the velocity a particle moves with; summed over neighbours of the
+    particle's own material (docs/wcsph.md, XSPH)."""
     return -m_j / (0.5 * (rho_i + rho_j)) * vij * w_ij
