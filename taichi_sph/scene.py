@@ -296,12 +296,12 @@ def soil_block_index(cfg, pts: np.ndarray) -> np.ndarray:
 
 
 def cut_to_soil(cfg, box, pts: np.ndarray) -> np.ndarray:
-    """A fluid block's lattice points `pts` kept by its `inside_soil` (the pores only: its points inside soil
-    blocks; not empty, a config check for water) or `outside_soil` (the open space only); all of them
-    without either (mode isph's blocks have neither)."""
-    if getattr(box, "inside_soil", False):
+    """A fluid block's (config.geometry.SoilSideBlock) lattice points `pts` kept by its `inside_soil` (the
+    pores only: its points inside soil blocks; not empty, a config check) or `outside_soil` (the open space
+    only); all of them without either (mode isph rejects both)."""
+    if box.inside_soil:
         return pts[soil_block_index(cfg, pts) >= 0]
-    if getattr(box, "outside_soil", False):
+    if box.outside_soil:
         return pts[soil_block_index(cfg, pts) < 0]
     return pts
 
