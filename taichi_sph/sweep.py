@@ -58,6 +58,8 @@ STATUS_BY_EXIT = {0: "completed", 2: "failed", 3: "unstable", 130: "interrupted"
 def add_arguments(p) -> None:
     p.add_argument("sweep_file", nargs="?", help="sweep file (YAML: config, out, set, grid, cases)")
     p.add_argument("--config", "-c", help="case file to sweep (instead of a sweep file)")
+    p.add_argument("--variant", help="apply a named variant of the case file to every case (before --set and "
+                                     "--param; overrides the sweep file's `variant`)")
     p.add_argument("--param", action="append", default=[], metavar="KEY=V1,V2,...",
                    help="a swept config entry and its values (YAML scalars or flow lists); repeatable, "
                         "the cases are every combination")
@@ -98,7 +100,7 @@ def parse_param(item: str) -> tuple[str, list]:
 
 def plan_from_args(args) -> dict:
     """The sweep as {config, raw, out, cases: [{name, params, overrides}]}, every case validated."""
-    from .config.load import parse_overrides, read_yaml
+    from .config.load import apply_variant, parse_overrides, read_yaml
     from .config.sweep import load_sweep_file
 
     if bool(args.sweep_file) == bool(args.config):
@@ -108,11 +110,14 @@ def plan_from_args(args) -> dict:
     common: dict = {}
     out = None
     workers = None
+    variant, asked_by = args.variant, "--variant"
     if args.sweep_file:
         spec = load_sweep_file(args.sweep_file)
         config = Path(args.sweep_file).parent / spec.config
         out = spec.out
         workers = spec.workers
+        if variant is None and spec.variant is not None:
+            variant, asked_by = spec.variant, f"sweep file '{args.sweep_file}': key 'variant'"
         common = dict(spec.set or {})
         grid = {k: (v if isinstance(v, list) else [v]) for k, v in (spec.grid or {}).items()}
         if spec.cases is not None:
@@ -124,6 +129,8 @@ def plan_from_args(args) -> dict:
         grid[key] = values
     common.update(dict(parse_overrides(args.overrides)))
     raw = read_yaml(config)
+    if variant is not None:
+        apply_variant(raw, variant, asked_by)
     if args.workers is not None and args.workers < 1:
         raise InputError("--workers must be at least 1")
     out = Path(args.out or out or Path("out") / f"sweep_{config.stem}")
@@ -144,8 +151,8 @@ def plan_from_args(args) -> dict:
     _unique_names(cases)
     for case in cases:
         case["config"] = _case_config(raw, case, config)
-    return {"config": str(config), "raw": raw, "out": str(out), "cases": cases, "param_keys": _param_keys(cases),
-            "workers": workers}
+    return {"config": str(config), "variant": variant, "raw": raw, "out": str(out), "cases": cases,
+            "param_keys": _param_keys(cases), "workers": workers}
 
 
 def _case_name(label, params: dict, numbered: bool, k: int) -> str:
@@ -407,6 +414,7 @@ def _write_h5(plan, cols, table, path: Path) -> None:
     with h5py.File(tmp, "w") as f:
         f.attrs["format"] = "taichi-sph-sweep"
         f.attrs["config"] = plan["config"]
+        f.attrs["variant"] = plan["variant"] or ""
         f.attrs["config_yaml"] = yaml.safe_dump(plan["raw"], sort_keys=False)
         f.attrs["columns"] = json.dumps(cols)
         f.attrs["params"] = json.dumps(plan["param_keys"])

@@ -121,7 +121,8 @@ def test_dask_local_cluster_gives_the_same_table(local_sweep, run_cli, tmp_path)
 
 def test_grid_is_every_combination():
     args = argparse.Namespace(sweep_file=None, config=str(DATA / "sweep_tank.yaml"), out=None, overrides=[],
-                              param=["water[0].max=[0.4,0.16],[0.4,0.24]", "dt=0.002,0.001"], workers=None)
+                              param=["water[0].max=[0.4,0.16],[0.4,0.24]", "dt=0.002,0.001"], workers=None,
+                              variant=None)
     plan = plan_from_args(args)
     names = [c["name"] for c in plan["cases"]]
     assert names == ["max-0.4x0.16_dt-0.002", "max-0.4x0.16_dt-0.001", "max-0.4x0.24_dt-0.002",
@@ -138,6 +139,10 @@ def test_bad_sweep_input_is_one_line_and_writes_nothing(run_cli, tmp_path):
     assert not out.exists()
     proc = run_cli("sweep", "--config", DATA / "sweep_tank.yaml", "--param", "metrics[0].probe=nowhere", "--out", out)
     assert proc.returncode == 2 and "metrics[0].probe" in proc.stderr
+    assert not out.exists()
+    proc = run_cli("sweep", "--config", DATA / "sweep_tank.yaml", "--variant", "deep", "--out", out)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1
+    assert "--variant 'deep': not defined in the config (variants: none)" in proc.stderr
     assert not out.exists()
 
 
@@ -156,14 +161,46 @@ def test_metric_reductions_against_closed_forms():
 
 def test_freefall_sweep_file_plans_the_three_porosities():
     args = argparse.Namespace(sweep_file=str(DATA.parent.parent / "configs" / "freefall_sweep.yaml"), config=None, out=None, overrides=[], param=[],
-                              workers=None)
+                              workers=None, variant=None)
     plan = plan_from_args(args)
     assert [c["config"].soil.regions[0].eps0 for c in plan["cases"]] == [0.3, 0.5, 0.8]
     assert [m.name for m in plan["cases"][0]["config"].metrics][:2] == ["arrival_time", "layer_volume_at_arrival"]
 
 
+def test_dry_levee_sweep_runs_the_variant_over_the_permeability(tmp_path):
+    """configs/embankment_dry_sweep.yaml: each case is the variant `dry` (its river, probes and metrics)
+    at the sweep's dx and length, one per permeability; --variant replaces the file's variant; a variant
+    the case file lacks is one line naming the option or the sweep file's key."""
+    from taichi_sph.errors import InputError
+
+    sweep = str(DATA.parent.parent / "configs" / "embankment_dry_sweep.yaml")
+
+    def plan(variant=None, path=sweep):
+        return plan_from_args(argparse.Namespace(sweep_file=path, config=None, variant=variant, out=None, param=[],
+                                                 overrides=["wcsph.soil.start_from=null"], workers=None))
+
+    p = plan()
+    cfgs = [c["config"] for c in p["cases"]]
+    assert p["variant"] == "dry"
+    assert [c.wcsph.soil.permeability for c in cfgs] == [0.015, 0.03, 0.06]
+    for cfg in cfgs:
+        assert (cfg.dx, cfg.end_time) == (0.02, 20.0)
+        assert cfg.description.endswith("[variant dry]")
+        assert cfg.water[0].outside_soil and not cfg.air
+        assert [m.name for m in cfg.metrics] == ["river_final", "front_at_14s", "front_final", "levee_water_final"]
+    air = [c["config"] for c in plan("dry_air")["cases"]]
+    assert len(air[0].air) == 3 and air[0].wcsph.xsph == 0.0 and air[0].dx == 0.02
+    with pytest.raises(InputError, match=r"^--variant 'wet': not defined in the config \(variants: dry, "):
+        plan("wet")
+    bad = tmp_path / "s.yaml"
+    bad.write_text(f"config: {Path(sweep).parent / 'embankment.yaml'}\nvariant: wet\n")
+    with pytest.raises(InputError, match=rf"^sweep file '{bad}': key 'variant' 'wet': not defined"):
+        plan(path=str(bad))
+
+
 @pytest.mark.parametrize("text, expect", [
-    ("config: a.yaml\nfoo: 1\nbar: 2\n", "unknown key 'bar' (keys: cases, config, grid, out, set, workers)"),
+    ("config: a.yaml\nfoo: 1\nbar: 2\n", "unknown key 'bar' (keys: cases, config, grid, out, set, variant, workers)"),
+    ("config: a.yaml\nvariant: [dry]\n", "key 'variant' must be the name of one of the case file's variants"),
     ("out: x\n", "key 'config' (the case file) is required"),
     ("config: 3\n", "key 'config' (the case file) is required"),
     ("config: a.yaml\nworkers: 0\n", "key 'workers' must be a positive integer"),

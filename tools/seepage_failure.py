@@ -31,6 +31,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -110,8 +111,21 @@ def _spacing(a, path) -> None:
             a.dx = float(rf.dx)
 
 
+def _soil(a, path) -> None:
+    """--k and --porosity, or the run's own soil (wcsph.soil.permeability, .porosity): a sweep over k reads
+    each run against its own conductivity."""
+    if a.k is None or a.porosity is None:
+        with RunFile(path) as rf:
+            soil = (yaml.safe_load(rf.config_yaml) or {}).get("wcsph", {}).get("soil", {})
+        a.k = float(soil["permeability"]) if a.k is None else a.k
+        a.porosity = float(soil["porosity"]) if a.porosity is None else a.porosity
+
+
 def dry(a) -> dict:
     _spacing(a, a.run)
+    _soil(a, a.run)
+    if a.t_ref is None:
+        a.t_ref = 0.06 / a.k
     wf = failure.wetting_front(a.run, a.dx, a.entry)
     t = np.asarray(wf["time"])
     front = np.asarray(wf["front"])
@@ -121,7 +135,7 @@ def dry(a) -> dict:
     integral = np.interp(t, tr, cum)
     eta = boussinesq_front_coefficient()
     ok = np.isfinite(front) & (t >= a.t_ref) & (front < a.toe - 2 * a.dx)
-    out = {"eta_f": eta, "t_ref": a.t_ref, "rows": []}
+    out = {"eta_f": eta, "t_ref": a.t_ref, "k": a.k, "porosity": a.porosity, "rows": []}
     if ok.sum() < 2:
         return out
     k0 = int(np.flatnonzero(ok)[0])
@@ -258,9 +272,11 @@ def main() -> None:
     dr.add_argument("run")
     dr.add_argument("--entry", type=float, default=1.26, help="riverside toe x (m)")
     dr.add_argument("--toe", type=float, default=2.26, help="x of the landside toe (m)")
-    dr.add_argument("--k", type=float, default=0.03, help="hydraulic conductivity (m/s)")
-    dr.add_argument("--porosity", type=float, default=0.4)
-    dr.add_argument("--t-ref", dest="t_ref", type=float, default=2.0, help="the advance's start time (s)")
+    dr.add_argument("--k", type=float, default=None, help="hydraulic conductivity (m/s); default: the run's")
+    dr.add_argument("--porosity", type=float, default=None, help="the soil's porosity n; default: the run's")
+    dr.add_argument("--t-ref", dest="t_ref", type=float, default=None,
+                    help="the advance's start time (s); default 0.06 m / k (2 s at k 3 cm/s): the seepage's time "
+                         "scale is 1 / k, so runs at other k start at the same stage")
     dr.add_argument("--shape-times", dest="shape_times", type=lambda s: [float(v) for v in s.split(",")],
                     default=[5.0, 10.0, 20.0])
     dr.add_argument("--dx", type=float, default=None, help="particle spacing (m); default: the run file's")

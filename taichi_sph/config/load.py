@@ -99,18 +99,24 @@ def read_yaml(path) -> dict:
     return data
 
 
+def apply_variant(raw: dict, variant: str, what: str = "--variant") -> None:
+    """Apply the config's named variant (its dotted overrides) to the raw mapping in place and mark the
+    description; InputError naming `what` (the option or key that asked for it) when it is not defined."""
+    variants = raw.get("variants") or {}
+    if not isinstance(variants, dict) or variant not in variants:
+        names = ", ".join(sorted(variants)) if isinstance(variants, dict) and variants else "none"
+        raise InputError(f"{what} '{variant}': not defined in the config (variants: {names})")
+    for key, value in (variants[variant] or {}).items():
+        set_dotted(raw, key, copy.deepcopy(value))
+    raw.setdefault("description", "")
+    raw["description"] = (str(raw["description"]) + f" [variant {variant}]").strip()
+
+
 def load_config(path=None, overrides=(), variant: str | None = None, data: dict | None = None) -> Config:
     """Build a validated Config from a YAML file (or a dict), a variant name and `key=value` overrides."""
     raw = copy.deepcopy(data) if data is not None else read_yaml(path)
     if variant:
-        variants = raw.get("variants") or {}
-        if variant not in variants:
-            names = ", ".join(sorted(variants)) or "none"
-            raise InputError(f"--variant '{variant}': not defined in the config (variants: {names})")
-        for key, value in (variants[variant] or {}).items():
-            set_dotted(raw, key, value)
-        raw.setdefault("description", "")
-        raw["description"] = (raw["description"] + f" [variant {variant}]").strip()
+        apply_variant(raw, variant)
     for key, value in parse_overrides(overrides):
         set_dotted(raw, key, value)
     try:

@@ -82,6 +82,8 @@ class SweepFile(BaseModel):
 
     #: the case file, relative to the sweep file
     config: str
+    #: a variant of the case file (its `variants` section) applied before `set` and the swept entries
+    variant: str | None = None
     #: output folder (relative to the working directory); default out/sweep_<config name>
     out: str | None = None
     #: overrides for every case (dotted keys; values may be lists or maps)
@@ -97,6 +99,7 @@ class SweepFile(BaseModel):
 #: the one-line message of a bad key of a sweep file, in the order they are reported
 SWEEP_KEY_ERRORS = {
     "config": "key 'config' (the case file) is required",
+    "variant": "key 'variant' must be the name of one of the case file's variants",
     "out": "key 'out' must be a folder name",
     "workers": "key 'workers' must be a positive integer",
     "set": "key 'set' must be a mapping of dotted keys",
