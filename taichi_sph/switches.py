@@ -81,6 +81,8 @@ class Switches:
     soil_air: bool | None = _switch((WCSPH,), "soil and air together: Biot drag of eq 46-47 between them "
                                               "(the soil's conductivity for air wcsph.soil.air_permeability)")
     soil_fixed: bool | None = _switch((WCSPH,), "the whole skeleton is rigid (wcsph.soil.fixed)")
+    pore_volume: bool | None = _switch((WCSPH,), "water particles in the soil fill its pores only: partial "
+                                                 "density, pore velocity (wcsph.soil.pore_water)")
     soil_blocks_fixed: bool | None = _switch((WCSPH,), "some soil particles are held by "
                                                        "soil_blocks[k].fixed")
     soil_dilatancy: bool | None = _switch((WCSPH,), "plastic flow changes the soil's volume "
@@ -132,6 +134,7 @@ class Switches:
                    soil_water=n_soil > 0 and n_water > 0,
                    soil_air=n_soil > 0 and air and cfg.air_conductivity() is not None,
                    soil_fixed=bool(sp.fixed),
+                   pore_volume=n_soil > 0 and n_water > 0 and sp.pore_water == "pore_volume",
                    soil_blocks_fixed=len(held_soil_ids(cfg, scene)) > 0,
                    soil_dilatancy=n_soil > 0 and sp.dilatancy_angle > 0.0)
 

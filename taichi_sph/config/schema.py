@@ -219,11 +219,18 @@ class WCSPHCase(_Case):
         top = max(blk.bounds(self.dim, self.tank.size)[1][-1] for blk in self.soil_blocks)
         return sp.constrained_modulus((1.0 - sp.porosity) * sp.grain_density * g * top)
 
+    def pore_storage(self) -> float:
+        """The share S of the mixture's volume the pore water's particles fill: 1 (`wcsph.soil.pore_water`
+        full_volume), or the porosity n (pore_volume); the pore water's storage is S / K_f (docs/biot.md)."""
+        sp = self.wcsph.soil
+        return sp.porosity if sp.pore_water == "pore_volume" else 1.0
+
     def pore_water_speed(self) -> float:
-        """Sound speed at which the water's modulus K_f = rho_w c0^2 is PORE_WATER_STIFFNESS M (m/s; 0
-        without soil): the storage 1 / K_f then slows consolidation by 2.5 % at most (docs/biot.md)."""
+        """Sound speed at which the water's modulus K_f = rho_w c0^2 is PORE_WATER_STIFFNESS S M (m/s; 0
+        without soil; S the `pore_storage`): the storage S / K_f then slows consolidation by 2.5 % at most
+        (docs/biot.md)."""
         m = self.soil_modulus()
-        return 0.0 if m is None else (PORE_WATER_STIFFNESS * m / self.fluid.density) ** 0.5
+        return 0.0 if m is None else (PORE_WATER_STIFFNESS * self.pore_storage() * m / self.fluid.density) ** 0.5
 
     def sound_speed(self) -> float:
         """Sound speed c0 of the water equation of state (m/s): the key, or the larger of speed_factor x

@@ -193,6 +193,12 @@ class WCSPHSoil(Strict):
     #: hold the soil particles where they are (a rigid porous skeleton: water seeps through it, the soil
     #: neither moves nor limits the time step); for steady-seepage checks
     fixed: bool = False
+    #: what a water particle inside the soil stands for (docs/biot.md, "Pore water"): `full_volume` (the
+    #: seed's overlapping sets: it fills the mixture's volume and moves with u = n v_f + (1 - n) v_s, so a
+    #: rising phreatic line stores 1 m^3 of water per m^3 of soil) or `pore_volume` (it fills the pores
+    #: only: partial density n rho_w, the pore velocity v_f, a storage of n per unit rise, as a sand's);
+    #: `pore_volume` needs `wcsph.density: continuity` and no air blocks
+    pore_water: Literal["full_volume", "pore_volume"] = "full_volume"
 
     @model_validator(mode="after")
     def _failure_keys(self):
@@ -338,6 +344,13 @@ def check_soil_blocks(cfg) -> None:
                 if not any(all(a < sh and b > sl for a, b, sl, sh in zip(block.min, block.max, slo, shi))
                            for slo, shi in bounds):
                     fail(f"{name}[{k}].inside_soil", "the block overlaps no soil block (no pore to fill)")
+    if cfg.wcsph.soil.pore_water == "pore_volume":
+        if cfg.wcsph.density != "continuity":
+            fail("wcsph.soil.pore_water", "pore_volume needs wcsph.density: continuity (eq 27 would average "
+                 "the pore water's density with the free water's across the soil's surface)")
+        if cfg.air:
+            fail("wcsph.soil.pore_water", "pore_volume takes no air blocks (air in the pores at the mixture's "
+                 "volume beside pore water at its own is not built)")
     for k, src in enumerate(cfg.inflow):
         check_box(src, cfg.dim, cfg.tank.size, f"inflow[{k}]")
         if src.level_probe is not None:

@@ -140,7 +140,8 @@ def excess_pore_pressure(cfg, scene, p, rho, mass, stress, water, vel) -> None:
     002 eq 55): the water seeps at Darcy's q = -(k / gamma_w) d u_e / dy relative to the skeleton, and with
     the layer laterally confined over an impermeable base the mixture's flux n v_f + (1 - n) v_s (the
     velocity the water particles carry) is zero, so the skeleton settles at v_s = -q = (k / gamma_w)
-    d u_e / dy and the water particles stay at rest. Started from rest instead, the layer reaches that
+    d u_e / dy and the water particles stay at rest (with `wcsph.soil.pore_water: pore_volume` they carry
+    the pore velocity v_f = -(1 - n) / n v_s). Started from rest instead, the layer reaches that
     speed through an undrained compression wave of amplitude ~rho c v_s (with the default sound speed,
     0.2-0.4 u0 in configs/consolidation.yaml, decaying over ~0.1 s)."""
     ex = cfg.wcsph.soil.initial_excess_pressure
@@ -153,17 +154,25 @@ def excess_pore_pressure(cfg, scene, p, rho, mass, stress, water, vel) -> None:
     soil = np.nonzero(kind == SOIL)[0]
     wat = np.nonzero(kind == WATER)[0]
     if len(wat):
-        # the settlement rate at t = 0+ (not for a held skeleton, which keeps its place)
-        if not cfg.wcsph.soil.fixed and not any(b.fixed for b in cfg.soil_blocks):
-            inside = (y[soil] >= ex.bottom) & (y[soil] <= ex.top)
-            arg = np.pi * (y[soil] - ex.bottom) / (ex.top - ex.bottom)
-            du_dy = ex.amplitude * np.pi / (ex.top - ex.bottom) * np.cos(arg)
-            g_abs = float(np.linalg.norm(cfg.gravity_vector()))
-            vel[soil, -1] = np.where(inside, cfg.wcsph.soil.permeability / (water[0] * g_abs) * du_dy, 0.0)
         from scipy.spatial import cKDTree  # start state only
 
         d, _ = cKDTree(scene.position[soil]).query(scene.position[wat], k=1)
         wet = wat[d < 0.5 * cfg.dx]
+        # the settlement rate at t = 0+ (not for a held skeleton, which keeps its place)
+        if not cfg.wcsph.soil.fixed and not any(b.fixed for b in cfg.soil_blocks):
+            g_abs = float(np.linalg.norm(cfg.gravity_vector()))
+
+            def settling(yy):
+                arg = np.pi * (yy - ex.bottom) / (ex.top - ex.bottom)
+                du_dy = ex.amplitude * np.pi / (ex.top - ex.bottom) * np.cos(arg)
+                inside = (yy >= ex.bottom) & (yy <= ex.top)
+                return np.where(inside, cfg.wcsph.soil.permeability / (water[0] * g_abs) * du_dy, 0.0)
+
+            vel[soil, -1] = settling(y[soil])
+            if cfg.wcsph.soil.pore_water == "pore_volume":
+                # the water particles carry the pore velocity: n v_f + (1 - n) v_s = 0
+                n0 = cfg.wcsph.soil.porosity
+                vel[wet, -1] = -(1.0 - n0) / n0 * settling(y[wet])
         p[wet] += u[wet]
         rho[wet] = eos.density_np(p[wet], *water)
         mass[wet] = rho[wet] * cfg.dx**cfg.dim

@@ -86,14 +86,15 @@ class SoilPasses:
         m_soil = cfg.soil_modulus() if fl.has_soil and fl.n_water > 0 else None
         if m_soil is not None:
             ratio = fl.rho_w * fl.c_w**2 / m_soil
+            share = cfg.pore_storage()  # the pore water's storage is share / K_f
             self.run_attrs["pore_water_modulus_ratio"] = ratio
-            if ratio < PORE_WATER_STIFFNESS * (1.0 - 1e-9):
+            if ratio < PORE_WATER_STIFFNESS * share * (1.0 - 1e-9):
                 log.warning("pore water K_f = rho_w c0^2 = %.4g Pa is %.3g x the soil's constrained modulus M = "
-                            "%.4g Pa (below %g): consolidation runs at c_v = k M / gamma_w / (1 + M / K_f), %.0f %% "
-                            "of the physical value; raise wcsph.water.sound_speed to %.4g m/s or more (or leave it "
-                            "to its default), or check wcsph.soil.youngs_modulus, exponent, poisson",
-                            fl.rho_w * fl.c_w**2, ratio, m_soil, PORE_WATER_STIFFNESS, 100.0 / (1.0 + 1.0 / ratio),
-                            cfg.pore_water_speed())
+                            "%.4g Pa (below %g): consolidation runs at c_v = k M / gamma_w / (1 + %g M / K_f), "
+                            "%.0f %% of the physical value; raise wcsph.water.sound_speed to %.4g m/s or more (or "
+                            "leave it to its default), or check wcsph.soil.youngs_modulus, exponent, poisson",
+                            fl.rho_w * fl.c_w**2, ratio, m_soil, PORE_WATER_STIFFNESS * share, share,
+                            100.0 / (1.0 + share / ratio), cfg.pore_water_speed())
         self.alpha_s = sp.alpha
         self.g_over_k = fl.g_abs / sp.permeability
         # the drag between soil and air (eq 46 with the air's density and the soil's conductivity for air)
@@ -127,6 +128,10 @@ class SoilPasses:
         self.nred = _NRED_S + dim + 1
         # per water particle n_i, f_i = phi_s / sum_soil V_j W_ij and phi_s of the pair drag (scratch)
         self.wmix = ti.Vector.field(3, float, ns)
+        # pore water at its own volume (wcsph.soil.pore_water: pore_volume): per water particle n_i and the
+        # soil's mean velocity around it, of the last drag pass (reordered with the particles: the fluid
+        # pass reads them at the start of the next step)
+        self.nvs = ti.Vector.field(dim + 1, float, n if fl.partial else 1)
         # 1 for a particle of a fixed soil block, indexed by particle id (never reordered, no state)
         self.sfix = ti.field(ti.i32, n if self.block_fixed else 1)
         if self.block_fixed:
@@ -139,6 +144,10 @@ class SoilPasses:
         if fl.has_soil:
             self.particle_fields = [self.sig, self.eps_p, self.pore, self.phi_w, self.adrag]
             self.adrag.fill(0.0)
+        if fl.partial:
+            self.particle_fields.append(self.nvs)
+            self.state_fields = (*type(self).state_fields, "nvs")
+            self.nvs.fill(1.0)  # n_i = 1 (free water) until the first drag pass; v_s bar then has no weight
 
     # ------------------------------------------------------------------ kernels
     @ti.func
@@ -256,6 +265,8 @@ class SoilPasses:
                     if ti.static(fl.coupled):  # noqa: SIM102 (compile-time if)
                         if kj == WATER:  # the pore pressure and wetness take the water at i's own place too
                             vj = sj[fl.S_M] / fl.rhof(j)
+                            if ti.static(fl.partial):
+                                vj /= self.nvs[j][0]
                             dpj = fl.p[j] - p0
                             wij = vj * kernels.w(r, h, fl.dim)
                             pn += dpj * wij
@@ -426,8 +437,13 @@ class SoilPasses:
                 if wsum > 0.0:
                     phi = ti.min(wsum / ti.max(1.0 - wall, 0.5), 1.0)  # the soil's share, walls aside
                     n_i = 1.0 - phi * (1.0 - nsum / wsum)
-                    amix = n_i * ai + (1.0 - n_i) * abar / wsum
+                    if ti.static(not fl.partial):  # pore water at its own volume takes no share of a_s
+                        amix = n_i * ai + (1.0 - n_i) * abar / wsum
                     wm = ti.Vector([n_i, phi / wsum, phi])
+                if ti.static(fl.partial):  # n_i for the next step (the soil's velocity: the last pass)
+                    nv = ti.Vector.zero(float, fl.dim + 1)
+                    nv[0] = wm[0]
+                    self.nvs[i] = nv
                 self.wmix[i] = wm
                 self.adrag[i] = amix - ai
                 self.amix[i] = amix
@@ -460,6 +476,8 @@ class SoilPasses:
         cs = 0.0
         if self._movable(j):
             cs = (1.0 - rhoj / self.rho_g) * rho_f / rhoj * c_f * phi_f
+            if ti.static(fl.partial):  # the pore water's mass per mixture volume is n rho_w, not rho_w
+                cs *= 1.0 - rhoj / self.rho_g
         lam = wm[0] * (wm[2] * c_f + cs)
         c = fl.m[i] * wm[0] * c_f * wm[1] * w_ij
         qs = (fl.v[i] + dt * self.amix[i]) - (fl.v[j] + dt * fl.a[j])
@@ -518,6 +536,7 @@ class SoilPasses:
                 fsum = ti.Vector.zero(float, fl.dim)
                 wsum = 0.0
                 dbar = ti.Vector.zero(float, fl.dim)
+                vnext = ti.Vector.zero(float, fl.dim)
                 xi = fl.xf(i)
                 for k in range(fl.nbr_walls(i)):  # soil
                     j = fl.grid.nbr[i, k]
@@ -526,9 +545,16 @@ class SoilPasses:
                         fsum += self._pair_drag(i, j, wij, dt)
                         wsum += wij
                         dbar += wij * self.adrag[j]
+                        if ti.static(fl.partial):  # the soil's velocity after its next kick
+                            vnext += wij * (fl.v[j] + dt * (fl.a[j] + self.adrag[j]))
                 ad = self.adrag[i] + fsum / fl.m[i]
-                if wsum > 0.0:
-                    ad += (1.0 - self.wmix[i][0]) * dbar / wsum
+                if ti.static(not fl.partial):  # noqa: SIM102
+                    if wsum > 0.0:
+                        ad += (1.0 - self.wmix[i][0]) * dbar / wsum
+                if ti.static(fl.partial):  # noqa: SIM102
+                    if wsum > 0.0:
+                        for d in ti.static(range(fl.dim)):
+                            self.nvs[i][1 + d] = vnext[d] / wsum
                 self.fdrag[i] = fsum
                 self.adrag[i] = ad
                 tot += fsum

@@ -135,6 +135,8 @@ class WCSPHSolver(SolverCommon):
         # ti.static switches: a scene compiles only what it uses (switches.py, also what `taichi-sph info
         # --config` reports)
         self.switches = sw = Switches.build(cfg, scene)
+        # pore water at its own volume (wcsph.soil.pore_water: pore_volume): partial density, pore velocity
+        self.partial = sw.pore_volume
         if cfg.timestep.cfl > CFL_STABLE:
             log.warning("timestep.cfl = %g is above %g, where the one-pass step of mode wcsph_biot stops damping "
                         "the acoustic modes (docs/wcsph.md, \"One step\"): expect them to grow", cfg.timestep.cfl,
@@ -741,6 +743,14 @@ class WCSPHSolver(SolverCommon):
                     for d in ti.static(range(self.dim)):
                         g_old[d] = si[self.S_G + d]
                 xs = ti.Vector.zero(float, self.dim)
+                n_i = 1.0
+                wi = vi
+                if ti.static(self.partial):  # noqa: SIM102
+                    if ki == WATER:
+                        nvi = self.soil.nvs[i]
+                        n_i = nvi[0]
+                        for d in ti.static(range(self.dim)):
+                            wi[d] = n_i * vi[d] + (1.0 - n_i) * nvi[1 + d]
                 # pressure acceleration, and the share of it the walls take through the gradient at i
                 accp = ti.Vector.zero(float, self.dim)
                 m_wall = ti.Matrix.zero(float, self.dim, self.dim)
@@ -774,7 +784,11 @@ class WCSPHSolver(SolverCommon):
                         nrm = self.normal[j]
                         beta = walls.boundary_beta(db, rij.dot(nrm) - db, self.beta_max)
                         vij = walls.boundary_relative_velocity(vi - self._vel(sj), nrm, beta, self.no_slip)
-                        div -= self.vol0 * vij.dot(gw)
+                        if ti.static(self.partial):
+                            div -= self.vol0 * walls.boundary_relative_velocity(wi - self._vel(sj), nrm, beta,
+                                                                                self.no_slip).dot(gw)
+                        else:
+                            div -= self.vol0 * vij.dot(gw)
                         mj = rhoi * self.vol0
                         # pressure at the wall particle: hydrostatic across the wall, the gradient at i
                         # along it (mirror image of the excess pressure), p_w = p_i + rho_i g . d_n +
@@ -793,7 +807,16 @@ class WCSPHSolver(SolverCommon):
                     else:
                         vij = vi - self._vel(sj)
                         mj = sj[self.S_M]
-                        div -= mj / sj[self.S_RHO] * vij.dot(gw)
+                        if ti.static(self.partial):
+                            wj = self._vel(sj)
+                            if kj == WATER:
+                                nvj = self.soil.nvs[j]
+                                mj /= nvj[0]
+                                for d in ti.static(range(self.dim)):
+                                    wj[d] = nvj[0] * wj[d] + (1.0 - nvj[0]) * nvj[1 + d]
+                            div -= mj / sj[self.S_RHO] * (wi - wj).dot(gw)
+                        else:
+                            div -= mj / sj[self.S_RHO] * vij.dot(gw)
                         if ti.static(self.dd_on):  # noqa: SIM102 (compile-time if): density diffusion
                             if ki == WATER and kj == ki:
                                 rho_h = self.dd_h * self.g.dot(-rij)  # hydrostatic rho_j - rho_i
@@ -831,6 +854,8 @@ class WCSPHSolver(SolverCommon):
                                                              gw)
                             nuj = self._nu(ti.cast(kj, ti.i32))
                             acc += operators.variable_laplacian_pair(mj, rhoi, nui, rhoj, nuj, f_ij) * vij
+                if ti.static(self.partial):  # n_i D_f rho / Dt = -rho div(n v_f + (1 - n) v_s)
+                    div /= n_i
                 if ti.static(self.dd_on):  # d rho / dt = -rho D + delta h c0 dif, written as D
                     div -= self.dd_coef * dif / si[self.S_RHO]
                 if ti.static(self.dd_grad):  # G_i = B^-1 sum: exact on a linear field; none where B is
@@ -871,7 +896,9 @@ class WCSPHSolver(SolverCommon):
                 an = acc.norm()
                 if an > 0.0:
                     ti.atomic_min(h_over_a, hi / an)
-                ti.atomic_min(h_over_c, hi / self._sound_speed(ki, rho))
+                # pore water at its own volume: its pressure answers div(q) / n (storage n / K_f), a sound
+                # speed c / sqrt(n_i)
+                ti.atomic_min(h_over_c, hi * ti.sqrt(n_i) / self._sound_speed(ki, rho))
                 ti.atomic_min(hmin, hi)
                 val = s2 + pi + xi.sum() + rho
                 if ti.math.isnan(val) or ti.math.isinf(val):
@@ -953,10 +980,25 @@ class WCSPHSolver(SolverCommon):
     def initial_diagnostics(self) -> dict:
         """Neighbour lists, forces at t = 0 (the first step needs a^0) and the divergence D^0 that the first
         steps' predictions start from. The soil's pore pressure and water presence are interpolated before
-        its forces, so that a^0 of the soil sees its pore pressure."""
+        its forces, so that a^0 of the soil sees its pore pressure. With pore water at its own volume
+        (`partial`) the first pass gives each water particle its porosity n_i, the particle's mass becomes
+        n_i rho dx^d (water placed in the soil at the lattice's spacing fills its pores) and the pass is
+        taken again with those masses."""
         self.neighbour_search()
         self._pairs(0.0)
+        if self.partial:
+            self._k_pore_masses()
+            self.rates_known = 0
+            self._pairs(0.0)
         return self.last
+
+    @ti.kernel
+    def _k_pore_masses(self):
+        """m_i <- n_i m_i for each water particle (n_i of the drag pass, 1 in free water), and its view s."""
+        for i in range(self.n):
+            if self.kind[i] == WATER:
+                self.m[i] *= self.soil.nvs[i][0]
+                self.s[i][self.S_M] = self.m[i]
 
     def propose_dt(self) -> tuple[float, int]:
         """Time step of eq 49 from the forces just computed: min(cfl min h/c, force min sqrt(h/|a|),
