@@ -164,30 +164,30 @@ def _dry_front(path):
 
 @pytest.mark.long
 def test_dry_levee_wetting_front_follows_boussinesq(run_cli, tmp_path):
-    """configs/embankment.yaml `dry` at dx 0.02, shortened as the first-yield test (k five times the
-    shipped, 0.15 m/s: the Boussinesq front's time scale is 1 / k; the front is a function of k t within
-    0.4 dx for k 1.5-6 cm/s, and at 0.15 m/s stands 0.5-1.25 dx behind, -38 % against the shipped k's
-    -34 % at k t 0.6 m, docs/levee.md "The front against the permeability"), 4 s: the river (0.12 m, falling to
-    0.103 m as the levee takes in water) against the dry levee. The reference is the Boussinesq solution
+    """configs/embankment.yaml `dry` (its pore water at its own volume, `wcsph.soil.pore_water:
+    pore_volume`, with density diffusion 0.1) at dx 0.02, shortened as the first-yield test: k five times
+    the shipped, 0.15 m/s (the Boussinesq front's time scale is 1 / k), 4 s for the shipped k's 20 s: the
+    river (0.12 m, falling to
+    0.108 m as the levee takes in water) against the dry levee. The reference is the Boussinesq solution
     for a sand of this permeability, x_f = 1.62 sqrt(k integral(H dt) / S) with the river level H(t) the
     probe reads and the drainable porosity S = n = 0.4 (dry sand, no capillarity); the advance is taken
-    from 0.4 s, so the entry's place on the sloping face drops out.
-    Known gap: the model's water particles fill the pores at full volume (their density is rho_w inside
-    the soil, docs/biot.md), so a rising phreatic line stores 1, not n, per unit rise and the front lags
-    the sand's by sqrt(n) ~ 0.63. Measured against S = n: -34 % at 2.2 s, -37 % at 4 s (against the
-    model's own storage S = 1 it would read +4 / -1 %; full runs at the shipped k: -36 % at dx 0.02 and
-    -31 % at dx 0.01 at 30 s, docs/levee.md). The bound, 40 %, sits 3 points above the measured gap; the
-    acceptance's 20 % needs the pore water's storage to carry n. Before ~2 s the wedge under the sloping
-    face is still filling. The advance is slower than linear: x_f = a + b t^p gives p = 0.37 (0.34-0.35
-    in the full runs; Boussinesq 0.5); checked as a speed over 2.2-4 s below that over 0.4-2.2 s.
+    from 0.4 s (k t = 0.06 m), so the entry's place on the sloping face drops out.
+    Measured against S = n: -19.8 % at 2 s, -19.7 % at 2.2 s, -17.7 % at 4 s. Bound 22 % over 2-4 s, the
+    largest measured plus 2 points; the acceptance's 20 % holds here and in the full runs at the shipped k
+    (-13..-14 % at dx 0.02 over 8-20 s, docs/levee.md), this 5x k reading 4-6 points lower than the
+    shipped k at the same k t (the front is a function of k t within 1.5 dx for k 1.5-6 cm/s, not beyond;
+    docs/levee.md, "The front against the permeability"). Without the density diffusion the front read
+    -22.6 / -20.0 % at 2 / 4 s, and pore water running ahead through the dry pores reached 3.4 kPa and
+    yielded the crest. With full_volume (pore water filling the mixture's volume, storage 1) the same case
+    read -34 / -37 %, the storage's sqrt(n). Before ~2 s the wedge under the sloping face is still
+    filling. The advance is slower than linear: checked as a speed over 2.2-4 s below that over 0.4-2.2 s
+    (x_f = a + b t^p over the full runs: p = 0.49 / 0.53 at dx 0.02 / 0.01; Boussinesq 0.5).
     The sound speed is a knob the front must not follow: the same case at the water's default sound
-    speed (351.5 m/s, K_f = 40 M: the physical c_v, 7.5x the steps), where eq 36 takes the flow's sound
-    speed (17.16 m/s) and the density diffusion is 0.1 in its gradient form by default, advances 0.131 m
-    from 0.4 s to 1.4 s against 0.130 m at the pinned 17.2 m/s (-27 % against S = n; to 2.2 s 0.183
-    against 0.182 m, -34 %; the same with half the time step; the hydrostatic form of the diffusion
-    0.183 m too). Bound: half a particle spacing, 0.01 m. With eq 36 at the raised c0 (its shear
-    viscosity 20x; the default before) it advances 0.105 m to 1.4 s (0.138 m to 2.2 s), 0.025 m short,
-    which this test catches; the run stops at 1.4 s, where that gap has grown past the bound by half."""
+    speed (K_f = 40 n M, 222 m/s, the pore water's c0 / sqrt(n) = 351 m/s: the physical c_v, 7.7x the
+    steps), where eq 36 takes the flow's sound speed (17.16 m/s) and the density diffusion is 0.1 in its
+    gradient form by default, advances 0.1355 m from 0.4 s to 1.4 s against 0.1404 m at the pinned
+    17.2 m/s. Bound: half a particle spacing, 0.01 m (full_volume: 0.131 against 0.130 m; with eq 36 at
+    the raised c0, the default before, 0.105 m, 0.025 m short, which this test catches)."""
     s1, s2, s3 = tmp_path / "d1.h5", tmp_path / "d2.h5", tmp_path / "d3.h5"
     r = run_cli("--config", "configs/embankment.yaml", "--variant", "dry_geostatic", "--set", "dx=0.02",
                 "--out", s1, "--no-progress")
@@ -209,17 +209,16 @@ def test_dry_levee_wetting_front_follows_boussinesq(run_cli, tmp_path):
     k0 = int(np.argmin(np.abs(t - 0.4)))
     late = t >= 2.0 - 1e-9
     err = (front[late] - front[k0]) / (ref[late] - ref[k0]) - 1
-    assert np.all(np.abs(err) < 0.4), err
+    assert np.all(np.abs(err) < 0.22), err
     # slower than linear: the speed over the second half of the window is below that of the first half
     mid = int(np.argmin(np.abs(t - 2.2)))
     assert (front[-1] - front[mid]) / (t[-1] - t[mid]) < (front[mid] - front[k0]) / (t[mid] - t[k0])
     # the physical c_v (the water's default sound speed, and with it the defaults of eq 36's speed and the
-    # density diffusion): the same advance to 1.4 s within half a particle spacing, and the same bound
+    # density diffusion): the same advance to 1.4 s within half a particle spacing
     r = run_cli(*stage2, "--set", "end_time=1.4", "--set", "wcsph.water.sound_speed=null", "--out", s3)
     assert r.returncode == 0, r.stderr
-    t3, front3, ref3 = _dry_front(s3)
+    t3, front3, _ = _dry_front(s3)
     k3, m3 = int(np.argmin(np.abs(t3 - 0.4))), int(np.argmin(np.abs(t3 - 1.4)))
     m = int(np.argmin(np.abs(t - 1.4)))
     adv, adv3 = front[m] - front[k0], front3[m3] - front3[k3]
     assert abs(adv3 - adv) < 0.01, (adv, adv3)
-    assert abs(adv3 / (ref3[m3] - ref3[k3]) - 1) < 0.4, adv3

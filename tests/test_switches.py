@@ -53,6 +53,7 @@ WCSPH_FLAGS = {
     "soil_water": lambda s: s.coupled,
     "soil_air": lambda s: s.soil_air,
     "soil_fixed": lambda s: s.soil.soil_fixed,
+    "pore_volume": lambda s: s.partial,
     "soil_blocks_fixed": lambda s: s.soil.block_fixed,
     "soil_dilatancy": lambda s: s.soil.dilatant,
 }

@@ -193,11 +193,11 @@ class WCSPHSoil(Strict):
     #: hold the soil particles where they are (a rigid porous skeleton: water seeps through it, the soil
     #: neither moves nor limits the time step); for steady-seepage checks
     fixed: bool = False
-    #: what a water particle inside the soil stands for (docs/biot.md, "Pore water"): `full_volume` (the
-    #: seed's overlapping sets: it fills the mixture's volume and moves with u = n v_f + (1 - n) v_s, so a
-    #: rising phreatic line stores 1 m^3 of water per m^3 of soil) or `pore_volume` (it fills the pores
-    #: only: partial density n rho_w, the pore velocity v_f, a storage of n per unit rise, as a sand's);
-    #: `pore_volume` needs `wcsph.density: continuity` and no air blocks
+    #: what a water particle inside the soil stands for (docs/biot.md, "Pore water at its own volume"):
+    #: `full_volume` (the seed's overlapping sets: it fills the mixture's volume and moves with u = n v_f +
+    #: (1 - n) v_s, so a rising phreatic line stores 1 m^3 of water per m^3 of soil) or `pore_volume` (it
+    #: fills the pores only: partial density n rho_w, the pore velocity v_f, a storage of n per unit rise,
+    #: as a sand's); `pore_volume` needs `wcsph.density: continuity` and no air blocks
     pore_water: Literal["full_volume", "pore_volume"] = "full_volume"
 
     @model_validator(mode="after")
