@@ -402,7 +402,10 @@ class SoilPasses:
         taken by walls, <= 1; porosity n_bar, acceleration a_bar) and n_i = 1 - phi_s (1 - n_bar):
         A = n_i a_i + (1 - n_i) a_bar, held in `amix`; `adrag` gets A - a_i, the pair drag of eq 46-47 and
         the soil's drag share follow in `_drag_soil_pass` and `_drag_water_after_pass`. `wmix` keeps n_i, the
-        weight factor f_i = phi_s / sum_soil V_j W_ij and phi_s for the pair drag."""
+        weight factor f_i = phi_s / sum_soil V_j W_ij and phi_s for the pair drag. With pore water at its own
+        volume (`fl.partial`) the particle carries v_f and takes no share of the soil's acceleration (A =
+        a_i); n_i goes to `nvs` for the next step's fluid pass (docs/biot.md, "Pore water at its own
+        volume")."""
         fl = self.fl
         h = fl.h0
         ti.loop_config(serialize=fl.serial)
@@ -519,7 +522,9 @@ class SoilPasses:
     @ti.func
     def _drag_water_after_pass(self, dt):
         """Water side of the Biot drag: the pair forces F_ij of `_pair_drag` over the soil around, and the
-        share (1 - n_i) that moves with the soil takes the soil's mean drag acceleration (docs/biot.md).
+        share (1 - n_i) that moves with the soil takes the soil's mean drag acceleration (docs/biot.md); with
+        pore water at its own volume there is no such share, and `nvs` gets the soil's mean velocity after
+        its next kick, v + dt (a + a_drag), for the next step's continuity.
         Also the momentum check: the sum over all particles of the drag forces `fdrag` (the soil's from
         `_drag_soil_pass`) and the largest of them (returned)."""
         fl = self.fl

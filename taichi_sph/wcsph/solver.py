@@ -697,6 +697,9 @@ class WCSPHSolver(SolverCommon):
           (eq 39-41); D_i is kept for the next two predictions of `_pack_q`;
         - forces with the predicted rho~, p~ of the view q: eq 34 (pressure; Morris viscosity with
           v^{n+1/2}), eq 36, eq 54 and gravity.
+        With pore water at its own volume (`partial`, wcsph.soil.pore_water: pore_volume; docs/biot.md) a water
+        neighbour counts with V_j = m_j / (n_j rho_j), and the continuity's D_i is the divergence of the
+        mixture's volume flux n v + (1 - n) v_s over n_i (n and v_s of the drag passes, `soil.nvs`).
         Soil particles take their stress update in the same loop (soil_step.py). Reductions: kinetic energy,
         max speed, water volume, min h/|a|, min h/c, non-finite count, first bad id, min h, air volume
         (returned).
