@@ -38,6 +38,9 @@ from ..switches import held_soil_ids
 from . import soil, terms
 
 _NRED_S = 6  # kinetic energy, max speed, min h/|a|, min h/c, non-finite count, first bad id
+#: K_f / M above which pore water at its own volume beside dry soil is warned about (check_partly_dry_start):
+#: the dry levee at dx 0.02 stood at 0.1 and 1.0 and yielded throughout at 3.9 and 16
+PORE_VOLUME_STIFF_DRY = 1.0
 
 log = logging.getLogger("taichi_sph")
 
@@ -567,6 +570,24 @@ class SoilPasses:
         return ti.Vector([tot[d] for d in ti.static(range(fl.dim))] + [big])
 
     # ------------------------------------------------------------------ host side
+    def check_partly_dry_start(self) -> None:
+        """With pore water at its own volume, stiff pore water (K_f above PORE_VOLUME_STIFF_DRY M) and soil that
+        starts dry (wetness phi_w below 0.5 after the first pass), log that the combination drove the dry
+        levee's skeleton into yielding (docs/biot.md, "Pore water at its own volume")."""
+        fl = self.fl
+        ratio = self.run_attrs.get("pore_water_modulus_ratio")
+        if not fl.partial or ratio is None or ratio <= PORE_VOLUME_STIFF_DRY:
+            return
+        soil = fl.kind.to_numpy()[: fl.n] == SOIL
+        dry = int(np.count_nonzero(self.phi_w.to_numpy()[: fl.n][soil] < 0.5))
+        if dry:
+            log.warning("wcsph.soil.pore_water: pore_volume with pore water of K_f = %.3g M and %d of %d soil "
+                        "particles dry at the start: in the dry levee such a skeleton was driven into yielding "
+                        "throughout by the pore water in partly filled pores at K_f = 3.9 M and 16 M (stable at "
+                        "0.1 M and 1.0 M; docs/biot.md, \"Pore water at its own volume\"); check the soil's "
+                        "plastic strain, or set wcsph.water.sound_speed to %.4g m/s (K_f = M) or use full_volume",
+                        ratio, dry, int(np.count_nonzero(soil)), math.sqrt(ratio ** -1) * fl.c_w)
+
     def after_passes(self, red):
         """The host's part after the pair kernel: `red` the soil's reductions (`passes`)."""
         fl = self.fl

@@ -993,6 +993,7 @@ class WCSPHSolver(SolverCommon):
             self._k_pore_masses()
             self.rates_known = 0
             self._pairs(0.0)
+            self.soil.check_partly_dry_start()
         return self.last
 
     @ti.kernel
