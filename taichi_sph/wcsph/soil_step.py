@@ -446,10 +446,8 @@ class SoilPasses:
                     if ti.static(not fl.partial):  # pore water at its own volume takes no share of a_s
                         amix = n_i * ai + (1.0 - n_i) * abar / wsum
                     wm = ti.Vector([n_i, phi / wsum, phi])
-                if ti.static(fl.partial):  # n_i for the next step (the soil's velocity: the last pass)
-                    nv = ti.Vector.zero(float, fl.dim + 1)
-                    nv[0] = wm[0]
-                    self.nvs[i] = nv
+                if ti.static(fl.partial):  # n_i for the next step (the soil's velocity: the last pass; it has no
+                    self.nvs[i][0] = wm[0]  # weight where n_i = 1)
                 self.wmix[i] = wm
                 self.adrag[i] = amix - ai
                 self.amix[i] = amix
@@ -586,7 +584,7 @@ class SoilPasses:
                         "throughout by the pore water in partly filled pores at K_f = 3.9 M and 16 M (stable at "
                         "0.1 M and 1.0 M; docs/biot.md, \"Pore water at its own volume\"); check the soil's "
                         "plastic strain, or set wcsph.water.sound_speed to %.4g m/s (K_f = M) or use full_volume",
-                        ratio, dry, int(np.count_nonzero(soil)), math.sqrt(ratio ** -1) * fl.c_w)
+                        ratio, dry, int(np.count_nonzero(soil)), fl.c_w / math.sqrt(ratio))
 
     def after_passes(self, red):
         """The host's part after the pair kernel: `red` the soil's reductions (`passes`)."""
