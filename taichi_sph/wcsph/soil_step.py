@@ -38,9 +38,6 @@ from ..switches import held_soil_ids
 from . import soil, terms
 
 _NRED_S = 6  # kinetic energy, max speed, min h/|a|, min h/c, non-finite count, first bad id
-#: K_f / M above which pore water at its own volume beside dry soil is warned about (check_partly_dry_start):
-#: the dry levee at dx 0.02 stood at 0.1 and 1.0 and yielded throughout at 3.9 and 16
-PORE_VOLUME_STIFF_DRY = 1.0
 
 log = logging.getLogger("taichi_sph")
 
@@ -135,6 +132,9 @@ class SoilPasses:
         # soil's mean velocity around it, of the last drag pass (reordered with the particles: the fluid
         # pass reads them at the start of the next step)
         self.nvs = ti.Vector.field(dim + 1, float, n if fl.partial else 1)
+        # pore water at its own volume: per water particle the pressure force on the soil's share (1 - n_i) of
+        # its mixture volume (N; N/m in 2D), divided by sum_soil V_j W_ij in the drag pass (scratch)
+        self.gpore = ti.Vector.field(dim, float, n if fl.partial else 1)
         # 1 for a particle of a fixed soil block, indexed by particle id (never reordered, no state)
         self.sfix = ti.field(ti.i32, n if self.block_fixed else 1)
         if self.block_fixed:
@@ -217,8 +217,11 @@ class SoilPasses:
         damping. The terms that need p_i or phi_w are summed without them and combined after the walk:
         sum_w V_j (p_j - p_i) grad W = sum_w V_j (p_j - p0) grad W - (p_i - p0) sum_w V_j grad W, with p0 the
         particle's pore pressure of the step before (so that the sums hold differences, not the pressure
-        itself, in f32). Reductions: kinetic energy, max speed, min h/|a|, min h/c, non-finite count, first
-        bad id (returned)."""
+        itself, in f32). With pore water at its own volume (`fl.partial`) the pore-pressure force is not
+        taken here: each water particle hands the soil around it the share (1 - n_i) of the pressure force
+        on its mixture volume (`_drag_water_pass`, docs/biot.md, "Pore water at its own volume"); p_i and
+        phi_w are still taken, for the frames, the guard and the walls' buoyant weight. Reductions: kinetic
+        energy, max speed, min h/|a|, min h/c, non-finite count, first bad id (returned)."""
         fl = self.fl
         ke = 0.0
         vmax = 0.0
@@ -316,7 +319,7 @@ class SoilPasses:
                         pij = terms.artificial_viscosity(vij, rij, r2, h, ci, rhoi, self.alpha_s, 0.0, fl.av_eps)
                         acc -= mw * pij * gw
                     elif kj == WATER:  # noqa: SIM102 (compile-time if)
-                        if ti.static(fl.coupled):
+                        if ti.static(fl.coupled and not fl.partial):  # pore_volume: the drag passes give it
                             gp_w += vj * dpj * gw
                             gv_w += vj * gw
                 b_fac = 1.0  # the buoyant share of the soil's weight, (1 - phi_w rho_w / rho_s)
@@ -337,14 +340,15 @@ class SoilPasses:
                     # the pore pressure at a wall particle: hydrostatic across the wall (no flow through
                     # it), the gradient at i along it (the mirror image of the excess pressure): p_w - p_i
                     # = rho_w g . dx_n + G_i . dx_t, weighted by phi_w
-                    gradp = gp_w - dp * gv_w + pw * fl.rho_w * g_n
+                    if ti.static(not fl.partial):
+                        gradp = gp_w - dp * gv_w + pw * fl.rho_w * g_n
                 if ti.static(fl.soil_air):
                     self.phi_a[i] = ti.min(pda / ti.max(1.0 - pdw, 0.5), 1.0)
                 # the walls' equilibrium gradient across their faces: the buoyant unit weight b_fac rho g
                 # where water fills the pores, whose pressure the pore term extrapolates
                 accs -= b_fac * g_n
                 acc += walls.wall_mirror_solve(accs, m_wall, -b_fac * g_t)
-                if ti.static(fl.coupled):  # G_i = gradp + phi_w m_wall G_i
+                if ti.static(fl.coupled and not fl.partial):  # G_i = gradp + phi_w m_wall G_i
                     acc -= walls.wall_mirror_solve(gradp, pw * m_wall, pw * fl.rho_w * g_t) / self.rho_g
                 acc -= self.damping * vi
                 if ti.static(self.soil_fixed):
@@ -407,8 +411,11 @@ class SoilPasses:
         the soil's drag share follow in `_drag_soil_pass` and `_drag_water_after_pass`. `wmix` keeps n_i, the
         weight factor f_i = phi_s / sum_soil V_j W_ij and phi_s for the pair drag. With pore water at its own
         volume (`fl.partial`) the particle carries v_f and takes no share of the soil's acceleration (A =
-        a_i); n_i goes to `nvs` for the next step's fluid pass (docs/biot.md, "Pore water at its own
-        volume")."""
+        a_i); n_i goes to `nvs` for the next step's fluid pass, and the pressure force on the soil's share
+        (1 - n_i) of the particle's mixture volume (`gpore`, from the fluid pass) goes to the soil around it
+        with the weights V_j W_ij / sum_soil V_k W_ik by which the continuity reads the soil's velocity there,
+        so that the work the pore water's pressure does on the soil is the work its continuity takes from the
+        soil's motion (docs/biot.md, "Pore water at its own volume")."""
         fl = self.fl
         h = fl.h0
         ti.loop_config(serialize=fl.serial)
@@ -440,6 +447,11 @@ class SoilPasses:
                     abar += wij * fl.a[j]
                 amix = ai
                 wm = ti.Vector([1.0, 0.0, 0.0])
+                if ti.static(fl.partial):  # the soil's share of the pressure force, over sum_soil V_j W_ij: soil j
+                    gp = ti.Vector.zero(float, fl.dim)  # takes V_j W_ij times it (`_drag_soil_pass`)
+                    if wsum > 0.0:
+                        gp = self.gpore[i] / wsum
+                    self.gpore[i] = gp
                 if wsum > 0.0:
                     phi = ti.min(wsum / ti.max(1.0 - wall, 0.5), 1.0)  # the soil's share, walls aside
                     n_i = 1.0 - phi * (1.0 - nsum / wsum)
@@ -502,12 +514,22 @@ class SoilPasses:
     def _drag_soil_pass(self, dt):
         """Soil side of the Biot drag (eq 46-47, docs/biot.md): the sum of the pair forces -F_ij of
         `_pair_drag` over the water around, per unit soil mass; zero for a held skeleton. In a uniform
-        interior this is C_s phi_w (u_bar - v_s) with C_s = n rho_w / rho_soil g / k."""
+        interior this is C_s phi_w (u_bar - v_s) with C_s = n rho_w / rho_soil g / k. With pore water at its
+        own volume the soil's acceleration first takes the pore water's pressure: from each water particle
+        around, V_i W_ij times its `gpore` (`_drag_water_pass`), so that the pair drag's implicit velocity
+        sees it."""
         fl = self.fl
         ti.loop_config(serialize=fl.serial)
         for m in range(fl.n if ti.static(fl.exact_grid) else fl.n_moving[None]):  # solver.moving_ids
             i = fl.moving_ids[m]
             if fl.fmask[i] == 2:
+                if ti.static(fl.partial):  # the pore water's pressure on the soil's share of its mixture volume
+                    fp = ti.Vector.zero(float, fl.dim)
+                    for k in range(fl.nbr_fluid(i), fl.grid.nbr_count[i]):  # water
+                        j = fl.grid.nbr[i, k]
+                        fp += self._soil_weight(fl.xf(j), i) * self.gpore[j]
+                    if self._movable(i):
+                        fl.a[i] += fp / fl.m[i]
                 fsum = ti.Vector.zero(float, fl.dim)
                 for k in range(fl.nbr_fluid(i), fl.grid.nbr_count[i]):  # water and air
                     j = fl.grid.nbr[i, k]
@@ -568,24 +590,6 @@ class SoilPasses:
         return ti.Vector([tot[d] for d in ti.static(range(fl.dim))] + [big])
 
     # ------------------------------------------------------------------ host side
-    def check_partly_dry_start(self) -> None:
-        """With pore water at its own volume, stiff pore water (K_f above PORE_VOLUME_STIFF_DRY M) and soil that
-        starts dry (wetness phi_w below 0.5 after the first pass), log that the combination drove the dry
-        levee's skeleton into yielding (docs/biot.md, "Pore water at its own volume")."""
-        fl = self.fl
-        ratio = self.run_attrs.get("pore_water_modulus_ratio")
-        if not fl.partial or ratio is None or ratio <= PORE_VOLUME_STIFF_DRY:
-            return
-        soil = fl.kind.to_numpy()[: fl.n] == SOIL
-        dry = int(np.count_nonzero(self.phi_w.to_numpy()[: fl.n][soil] < 0.5))
-        if dry:
-            log.warning("wcsph.soil.pore_water: pore_volume with pore water of K_f = %.3g M and %d of %d soil "
-                        "particles dry at the start: in the dry levee such a skeleton was driven into yielding "
-                        "throughout by the pore water in partly filled pores at K_f = 3.9 M and 16 M (stable at "
-                        "0.1 M and 1.0 M; docs/biot.md, \"Pore water at its own volume\"); check the soil's "
-                        "plastic strain, or set wcsph.water.sound_speed to %.4g m/s (K_f = M) or use full_volume",
-                        ratio, dry, int(np.count_nonzero(soil)), fl.c_w / math.sqrt(ratio))
-
     def after_passes(self, red):
         """The host's part after the pair kernel: `red` the soil's reductions (`passes`)."""
         fl = self.fl

@@ -699,7 +699,9 @@ class WCSPHSolver(SolverCommon):
           v^{n+1/2}), eq 36, eq 54 and gravity.
         With pore water at its own volume (`partial`, wcsph.soil.pore_water: pore_volume; docs/biot.md) a water
         neighbour counts with V_j = m_j / (n_j rho_j), and the continuity's D_i is the divergence of the
-        mixture's volume flux n v + (1 - n) v_s over n_i (n and v_s of the drag passes, `soil.nvs`).
+        mixture's volume flux n v + (1 - n) v_s over n_i (n and v_s of the drag passes, `soil.nvs`); the
+        pressure force on the particle, over n_i, is the force on its mixture volume, whose share (1 - n_i)
+        `soil.gpore` keeps for the soil (its pore-pressure force, handed out by the drag passes).
         Soil particles take their stress update in the same loop (soil_step.py). Reductions: kinetic energy,
         max speed, water volume, min h/|a|, min h/c, non-finite count, first bad id, min h, air volume
         (returned).
@@ -867,7 +869,10 @@ class WCSPHSolver(SolverCommon):
                         g_new = b_mat.inverse() @ g_sum
                     self.grad_rho[i] = g_new
                 # a_p = A_p + m_wall a_p (the walls' tangential terms carry G_i = -rho_i a_p)
-                acc += walls.wall_mirror_solve(accp, m_wall, hyd_t)
+                a_p = walls.wall_mirror_solve(accp, m_wall, hyd_t)
+                acc += a_p
+                if ti.static(self.partial):  # the same force on the soil's share (1 - n_i) of i's mixture volume
+                    self.soil.gpore[i] = (1.0 - n_i) / n_i * mi * a_p
                 self.a[i] = acc
                 self.rate[i] = ti.Vector([div, self.rate[i][0]])
                 # density and h accumulate in f64 (the fields are f64), the EOS is evaluated there too
@@ -993,7 +998,6 @@ class WCSPHSolver(SolverCommon):
             self._k_pore_masses()
             self.rates_known = 0
             self._pairs(0.0)
-            self.soil.check_partly_dry_start()
         return self.last
 
     @ti.kernel
