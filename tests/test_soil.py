@@ -374,19 +374,21 @@ def test_soft_pore_water_warns_and_is_recorded(run_cli, tmp_path):
     assert "wcsph.water.sound_speed" in r3.stderr, r3.stderr
 
 
-def test_dealt_moving_list_leaves_every_particle_as_it_was(ti_cpu, monkeypatch):
+@pytest.mark.parametrize("pore_water", ["full_volume", "pore_volume"])
+def test_dealt_moving_list_leaves_every_particle_as_it_was(ti_cpu, monkeypatch, pore_water):
     """A parallel scene with soil deals its list of moving particles to the threads in chunks
     (solver.DEAL_CHUNK, `_k_moving_list`), so that each thread's block of every loop samples the whole scene.
     The list must stay a permutation of the moving particles, and the particles' states must not depend on
     it: each particle's update reads only its neighbours, the loop order changes sums of diagnostics only.
     configs/consolidation.yaml (433 particles, soil + water) run 60 steps with its loops parallel, the list
-    in cell order and dealt to 2 threads: positions, velocities and stresses equal bit for bit."""
+    in cell order and dealt to 2 threads: positions, velocities and stresses equal bit for bit. With
+    pore_volume too, whose soil gathers its pore-pressure force from the water's shares (no atomic sums)."""
     import taichi_sph.wcsph.solver as sv
     from taichi_sph.run import TimeStepper
     from taichi_sph.scene import build_scene
     from taichi_sph.solvers import make_solver
 
-    cfg = load_config("configs/consolidation.yaml", ["precision=f64"])
+    cfg = load_config("configs/consolidation.yaml", ["precision=f64", f"wcsph.soil.pore_water={pore_water}"])
     monkeypatch.setattr(sv, "SERIAL_BELOW_SOIL", 0)
     out = {}
     for deal in (1, 2):
