@@ -10,7 +10,6 @@ import taichi as ti
 
 from taichi_sph.config.load import load_config
 from taichi_sph.errors import InputError
-
 from taichi_sph.io.hdf5 import RunFile
 from taichi_sph.wcsph import soil
 from taichi_sph.wcsph.consolidation import consolidation_coefficient, isochrone_errors
