@@ -25,8 +25,8 @@ from .solvers import make_solver
 log = logging.getLogger("taichi_sph")
 
 DIAG_COLUMNS = ("time", "dt", "kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
-                "wall_seconds", "dt_limit", "free_surface", "collisions", "isolated", "closed_bodies", "drag_sum",
-                "drag_max")
+                "wall_seconds", "dt_limit", "free_surface", "collisions", "isolated", "closed_bodies",
+                "shift_substeps", "drag_sum", "drag_max")
 #: columns the driver fills itself; the others come from the solver's step() (the ones its
 #: `diagnostic_names` lists, contract.Solver)
 DRIVER_COLUMNS = ("time", "dt", "wall_seconds", "dt_limit")

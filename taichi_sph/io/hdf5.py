@@ -73,6 +73,7 @@ UNITS: dict[str, str] = {
     "free_surface": "1",
     "isolated": "1",
     "closed_bodies": "1",
+    "shift_substeps": "1",
     "stress": "Pa",
     "effective_stress": "Pa",
     "deviatoric_stress": "Pa",

@@ -65,6 +65,12 @@ TENSION_PASSES = 3
 #: is at least this: the projection's overshoot, up to 1 / lambda_min(M_i) ~ 3-5 on disordered pore water,
 #: carries into the next step divided by D (_k_corrector)
 DRAG_CORRECTED = 5.0
+#: the shifting is an explicit diffusion of the particles' concentration with coefficient A h |u|; where its
+#: number A |u| dt / h over the water in the ground exceeds this, the step's shift is taken in substeps,
+#: each with grad C at the positions the one before left (at most SHIFT_SUBSTEPS_MAX; docs/isph.md,
+#: "Shifting in substeps")
+SHIFT_NUMBER_MAX = 0.25
+SHIFT_SUBSTEPS_MAX = 4
 #: flags of a vertical wall particle in _k_wet: water within its support reaches its height (not more than
 #: 0.6 dx below it), and not all of that water hangs above it (some within 0.6 dx above it or lower)
 WET_REACHED, WET_NOT_HANGING = 2, 4
@@ -88,7 +94,7 @@ class ISPHSolver(SolverCommon):
 
     #: the per-step diagnostics step() reports (run.DIAG_COLUMNS lists every mode's)
     diagnostic_names = ("kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
-                        "free_surface", "collisions", "isolated", "closed_bodies")
+                        "free_surface", "collisions", "isolated", "closed_bodies", "shift_substeps")
 
     @property
     def n_fluid(self) -> int:
@@ -1209,36 +1215,90 @@ class ISPHSolver(SolverCommon):
             if self.solve_mask[i] == 1:
                 self.v[i] = self.vtmp[i]
 
+    @ti.func
+    def _advection_velocity(self, i):
+        """u = v / eps (pore advection) or v (Darcy)."""
+        u = self.v[i]
+        if ti.static(self.pore_advection):
+            u = u / self.eps[i]
+        return u
+
+    @ti.func
+    def _shift(self, i, frac):
+        """The shifting displacement over the fraction frac of the step dt: dr = -A h |u| frac dt grad C
+        (grad C with Lind's anti-pairing term), with its component along the surface normal n = -grad C /
+        |grad C| removed for particles within the support of a free-surface particle, and capped at frac
+        shifting_max."""
+        u = self._advection_velocity(i)
+        gc = self.grad_c[i]
+        ds = -self.shift_a * self.h * u.norm() * (frac * self.dt[None]) * gc
+        near_surface = self.free[i]
+        for k in range(self.grid.nbr_count[i]):
+            j = self.grid.nbr[i, k]
+            if self.kind[j] == WATER and self.free[j] == 1:
+                near_surface = 1
+        if near_surface == 1 and gc.norm() > 0.0:
+            nrm = -gc.normalized()
+            ds -= ds.dot(nrm) * nrm
+        mag = ds.norm()
+        cap = self.shift_max * frac
+        if mag > cap:
+            ds *= cap / mag
+        return ds
+
     @ti.kernel
-    def _k_advect(self):
-        """x += dt u, u = v / eps (pore) or v (Darcy); plus the shifting displacement
-        dr = -A h |u| dt grad C (grad C with Lind's anti-pairing term), with its component along the
-        surface normal n = -grad C / |grad C| removed for particles within the support of a free-surface
-        particle, and capped at shifting_max."""
+    def _k_advect(self, frac: float):
+        """x += dt u, u = v / eps (pore) or v (Darcy); plus the shifting displacement of `_shift` over the
+        fraction frac of the step (the first of `shift_substeps`, with grad C of the step's start)."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1:
                 dt = self.dt[None]
-                u = self.v[i]
-                if ti.static(self.pore_advection):
-                    u = u / self.eps[i]
-                dr = dt * u
+                dr = dt * self._advection_velocity(i)
                 if ti.static(self.shifting):
-                    gc = self.grad_c[i]
-                    ds = -self.shift_a * self.h * u.norm() * dt * gc
-                    near_surface = self.free[i]
-                    for k in range(self.grid.nbr_count[i]):
-                        j = self.grid.nbr[i, k]
-                        if self.kind[j] == WATER and self.free[j] == 1:
-                            near_surface = 1
-                    if near_surface == 1 and gc.norm() > 0.0:
-                        nrm = -gc.normalized()
-                        ds -= ds.dot(nrm) * nrm
-                    mag = ds.norm()
-                    if mag > self.shift_max:
-                        ds *= self.shift_max / mag
-                    dr += ds
+                    dr += self._shift(i, frac)
                 self.x[i] += dr
+                if ti.static(self.periodic):
+                    self.x[i] = operators.wrap(self.x[i], self.period)
+
+    @ti.kernel
+    def _k_shift_number(self) -> float:
+        """The shifting's diffusion number A |u| dt / h over the water in the ground (eps < 1), largest."""
+        nu = 0.0
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n):
+            if self.solve_mask[i] == 1 and self.eps[i] < 1.0:
+                ti.atomic_max(nu, self.shift_a * self._advection_velocity(i).norm() * self.dt[None] / self.h)
+        return nu
+
+    @ti.kernel
+    def _k_grad_c(self):
+        """grad C (with the anti-pairing term) at the particles' present positions, as `_k_density` takes
+        it at the step's start, for a shifting substep."""
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n):
+            if self.solve_mask[i] == 1:
+                xi = self.x[i]
+                gc = ti.Vector.zero(float, self.dim)
+                w_ref = self.w_dx
+                if ti.static(self.porous):  # noqa: SIM102 (compile-time if)
+                    if self.eps[i] < 1.0:
+                        w_ref = kernels.w(self.dx * self.eps[i] ** (-1.0 / self.dim), self.h, self.dim)
+                for k in range(self.grid.nbr_count[i]):
+                    j, rij, r = self._pair(i, k, xi)
+                    if self._present(j) and r > 0.0:
+                        gw = kernels.grad_w(rij, r, self.h, self.dim)
+                        ratio = kernels.w(r, self.h, self.dim) / w_ref
+                        gc += self._volume(j) * (1.0 + 0.2 * ratio**4) * gw
+                self.grad_c[i] = gc
+
+    @ti.kernel
+    def _k_shift(self, frac: float):
+        """A later shifting substep: x += the shift of `_shift` over the fraction frac of the step."""
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n):
+            if self.solve_mask[i] == 1:
+                self.x[i] += self._shift(i, frac)
                 if ti.static(self.periodic):
                     self.x[i] = operators.wrap(self.x[i], self.period)
 
@@ -1357,7 +1417,13 @@ class ISPHSolver(SolverCommon):
         if self.collision:
             self._k_collision()
             collisions = int(self.collisions[None])
-        self._k_advect()
+        nsub = 1
+        if self.shifting and self.porous:
+            nsub = min(max(1, math.ceil(self._k_shift_number() / SHIFT_NUMBER_MAX)), SHIFT_SUBSTEPS_MAX)
+        self._k_advect(1.0 / nsub)
+        for _ in range(nsub - 1):
+            self._k_grad_c()
+            self._k_shift(1.0 / nsub)
         if self.motion.any:
             self.motion.advance(self.x, self.n)
         t0 = self._tick("corrector", t0)
@@ -1368,7 +1434,7 @@ class ISPHSolver(SolverCommon):
         self.last = {"kinetic_energy": float(d[0]), "max_speed": float(d[1]), "water_volume": float(d[2]),
                      "cg_iterations": iters, "cg_residual": res, "free_surface": int(d[5]), "isolated": int(d[6]),
                      "closed_bodies": int(self.closed_bodies[None]),
-                     "collisions": collisions}
+                     "collisions": collisions, "shift_substeps": nsub}
         if d[3] > 0:
             raise guard.non_finite_error(self.step_count, self.time, int(d[3]), int(d[4]),
                                          "position, velocity or pressure")
@@ -1389,7 +1455,7 @@ class ISPHSolver(SolverCommon):
         d = self._k_diagnostics().to_numpy()
         self.last = {"kinetic_energy": float(d[0]), "max_speed": float(d[1]), "water_volume": float(d[2]),
                      "cg_iterations": 0, "cg_residual": 0.0, "free_surface": int(d[5]), "isolated": int(d[6]),
-                     "closed_bodies": int(self.closed_bodies[None]), "collisions": 0}
+                     "closed_bodies": int(self.closed_bodies[None]), "collisions": 0, "shift_substeps": 0}
         return self.last
 
     # ------------------------------------------------------------------ output
