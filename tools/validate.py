@@ -731,7 +731,12 @@ DIAGNOSES = {
                 "and 0.007; docs/freefall.md, \"The time step at dx 1 cm\"). Since the wall collision takes "
                 "every face of a corner (2026-11-28) the eps0 0.8 fraction holds at 0.750 / 0.738 / 0.750 over "
                 "those steps and the arrival still moves (0.239 / 0.221 / 0.215 s); eps0 0.3 reads 0.377 / "
-                "0.374 / 0.386 s and 0.282 / 0.291 / 0.292; the seed's geometry (its "
+                "0.374 / 0.386 s and 0.282 / 0.291 / 0.292. With the shift in substeps where its diffusion "
+                "number in the ground passes 0.25 (2026-11-28, later; docs/freefall.md, \"Shifting in "
+                "substeps\") dt 1 ms reads 0.378 / 0.320 / 0.245 s (-10.0 / -5.9 / -5.8 %) and 0.285 / 0.482 "
+                "/ 0.760 of the water in the layer (eps0 0.3 / 0.5 / 0.8), eps0 0.8 at 1 / 0.625 / 0.5 ms "
+                "0.245 / 0.224 / 0.206 s and 0.760 / 0.748 / 0.707 (its 0.5 ms fraction 0.043 lower than "
+                "before), eps0 0.3 0.378 / 0.374 / 0.383 s and 0.285 / 0.291 / 0.290; the seed's geometry (its "
                 "figure 5 is not in the text) is our reading.",
 }
 
