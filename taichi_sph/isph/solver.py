@@ -415,6 +415,23 @@ class ISPHSolver(SolverCommon):
         return vj
 
     @ti.func
+    def _anti_pairing_reference(self, i):
+        """The kernel at the spacing of water at i's porosity, W(dx / eps^(1/dim)) (the lattice spacing in
+        free water), against which the shift's anti-pairing term measures a pair (`_grad_c_pair`)."""
+        w_ref = self.w_dx
+        if ti.static(self.porous and self.shifting):  # noqa: SIM102 (compile-time if)
+            if self.eps[i] < 1.0:
+                w_ref = kernels.w(self.dx * self.eps[i] ** (-1.0 / self.dim), self.h, self.dim)
+        return w_ref
+
+    @ti.func
+    def _grad_c_pair(self, vj, r, gw, w_ref):
+        """A pair's term of the shift's grad C: V_j (1 + 0.2 (W_ij / w_ref)^4) grad W_ij (Lind et al. 2012's
+        anti-pairing term)."""
+        ratio = kernels.w(r, self.h, self.dim) / w_ref
+        return vj * (1.0 + 0.2 * ratio**4) * gw
+
+    @ti.func
     def _mass_and_density(self, i, j):
         """Mass m_j and reference density rho_bar_j neighbour j carries in i's momentum and PPE sums: its
         own (m, eps_j rho_w) for water; a wall particle stands for water at i's porosity (eps_i m,
@@ -438,12 +455,7 @@ class ISPHSolver(SolverCommon):
                 gc = ti.Vector.zero(float, self.dim)
                 n_water = 0
                 nb = 0.0
-                # anti-pairing reference: the kernel at the spacing of water at this porosity,
-                # dx / eps^(1/dim) (the lattice spacing in free water)
-                w_ref = self.w_dx
-                if ti.static(self.porous and self.shifting):
-                    if self.eps[i] < 1.0:
-                        w_ref = kernels.w(self.dx * self.eps[i] ** (-1.0 / self.dim), self.h, self.dim)
+                w_ref = self._anti_pairing_reference(i)
                 # eq 34 counts eps N_surf; a pore lattice holds fewer neighbours than eps N_full
                 # (2D, eps = 0.3: 4 within r_e, below 0.3 x 17 = 5.1, so every particle would be
                 # free): the threshold scales with the pore lattice's own count instead
@@ -481,8 +493,7 @@ class ISPHSolver(SolverCommon):
                         gw = kernels.grad_w(rij, r, self.h, self.dim)
                         M += terms.moment_pair(vj, rij, gw)
                         if ti.static(self.shifting):
-                            ratio = kernels.w(r, self.h, self.dim) / w_ref
-                            gc += vj * (1.0 + 0.2 * ratio**4) * gw
+                            gc += self._grad_c_pair(vj, r, gw, w_ref)
                 ksum = self.kernel_sum
                 if ti.static(self.porous):
                     if self.eps[i] < 1.0:
@@ -1280,16 +1291,11 @@ class ISPHSolver(SolverCommon):
             if self.solve_mask[i] == 1:
                 xi = self.x[i]
                 gc = ti.Vector.zero(float, self.dim)
-                w_ref = self.w_dx
-                if ti.static(self.porous):  # noqa: SIM102 (compile-time if)
-                    if self.eps[i] < 1.0:
-                        w_ref = kernels.w(self.dx * self.eps[i] ** (-1.0 / self.dim), self.h, self.dim)
+                w_ref = self._anti_pairing_reference(i)
                 for k in range(self.grid.nbr_count[i]):
                     j, rij, r = self._pair(i, k, xi)
                     if self._present(j) and r > 0.0:
-                        gw = kernels.grad_w(rij, r, self.h, self.dim)
-                        ratio = kernels.w(r, self.h, self.dim) / w_ref
-                        gc += self._volume(j) * (1.0 + 0.2 * ratio**4) * gw
+                        gc += self._grad_c_pair(self._volume(j), r, kernels.grad_w(rij, r, self.h, self.dim), w_ref)
                 self.grad_c[i] = gc
 
     @ti.kernel
