@@ -409,7 +409,7 @@ def test_freefall_coarse_volume_and_fraction_in_layer(freefall_coarse):
       within -1.5..+2.0 % after 0.1 s (-1.8..+2.0 / -2.8..+2.5 %), the spike included (eq 34's count
       alone: -4.4..-5.7 % while the water passes the layer); bound 5 %, which a loss of the water
       entering the ground would exceed; the acceptance's 1 % at every frame is not met
-      (docs/freefall.md)."""
+      (docs/freefall.md): the entry dip is first order in dx (test_freefall_entry_dip_falls_with_the_spacing)."""
     out, r = freefall_coarse
     assert r.returncode == 0, r.stderr
     with RunFile(out) as rf:
