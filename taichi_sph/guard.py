@@ -47,6 +47,10 @@ WALL_TOLERANCE = 1.0e-6
 #: (half a spacing behind the face). Deepest past a face over whole runs (frames): dam break isph
 #: (configs/dambreak.yaml) 0.004 dx, dam break wcsph_biot at dx = a / 20 0.42 dx, breakwater 0
 WALL_CROSSING_DEPTH = 0.5
+#: gauge pressure of vacuum (Pa; pressures are gauge, 0 at a free surface): no liquid is held in tension
+#: below it, water cavitates first. Mode isph's pressure equation can ask for more where a surface it
+#: did not find reads as dilated water (docs/freefall.md, "Small fixed steps"); the guard warns
+VACUUM_GAUGE_PRESSURE = -101325.0
 
 
 class StabilityGuard:
@@ -66,6 +70,10 @@ class StabilityGuard:
         self.rho_ref = np.asarray(rho_ref, dtype=float)
         # density ratio of water and air only (soil has its own density and no such bound here)
         self.fluid = np.isin(self.kind, (WATER, AIR))
+        #: the lowest water pressure of any step (mode isph's pressure_min), when, and the steps below vacuum
+        self.pressure_min = math.inf
+        self.pressure_min_time = 0.0
+        self.below_vacuum = 0
         # soil particles with a pore pressure (mode wcsph_biot; mode isph's soil markers carry none)
         self.soil = (self.kind == SOIL) & (cfg.mode == "wcsph_biot")
         self.wall = self.kind == WALL
@@ -102,8 +110,11 @@ class StabilityGuard:
     def due(self, step: int) -> bool:
         return step % self.every == 0
 
-    def after_step(self, step: int, time: float, diag: dict, fastest) -> None:
-        """Per-step check from the solver's reductions: the speed bound (`fastest()` gives the particle id)."""
+    def after_step(self, step: int, time: float, diag: dict, fastest, pressures=None) -> None:
+        """Per-step check from the solver's reductions: the speed bound (`fastest()` gives the particle id);
+        where the solver reports its lowest water pressure (mode isph), water below vacuum: a warning at the
+        first such step, naming the particle (`pressures()` gives every particle's, in id order), and a count
+        (`report_tension`)."""
         speed = diag["max_speed"]
         if not speed <= self.speed_bound:  # NaN fails too
             pid = fastest()
@@ -111,6 +122,48 @@ class StabilityGuard:
                 f"{where(step, time)}: speed {speed:.4g} m/s exceeds the bound {self.speed_bound:.4g} m/s "
                 f"(guard.max_speed) at particle id {pid}", step=step, time=time, quantity="speed", particles=[pid],
                 family="bounds" if math.isfinite(speed) else "nonfinite")
+        p = diag.get("pressure_min")
+        if p is None:
+            return
+        if p < self.pressure_min:
+            self.pressure_min, self.pressure_min_time = p, time
+        if p < VACUUM_GAUGE_PRESSURE:
+            self.below_vacuum += 1
+            if self.below_vacuum == 1:
+                log.warning("%s: water pressure %.4g kPa at particle id %s, below vacuum (%.4g kPa gauge): the "
+                            "pressure equation pulls on the water harder than a liquid holds; at smaller fixed steps "
+                            "in porous ground this has thrown water through it (docs/freefall.md, \"Small fixed "
+                            "steps\")", where(step, time), p / 1e3, self._lowest_water(pressures),
+                            VACUUM_GAUGE_PRESSURE / 1e3)
+
+    def _lowest_water(self, pressures):
+        """Id of the water particle with the lowest pressure ("?" without the pressures)."""
+        if pressures is None:
+            return "?"
+        p = np.where(self.kind == WATER, np.asarray(pressures(), dtype=float), np.inf)
+        return int(np.argmin(np.where(np.isnan(p), np.inf, p)))
+
+    def tension_state(self) -> list:
+        """The lowest pressure, when, and the steps below vacuum so far, for a checkpoint."""
+        return [self.pressure_min, self.pressure_min_time, self.below_vacuum]
+
+    def restore_tension(self, state) -> None:
+        """Go on from a checkpoint's `tension_state()`."""
+        pmin, tmin, below = state
+        self.pressure_min, self.pressure_min_time, self.below_vacuum = float(pmin), float(tmin), int(below)
+
+    def report_tension(self, writer, summary: dict) -> None:
+        """Root attributes `pressure_min`, `pressure_min_time`, `below_vacuum_steps`, and a warning that
+        sums the run up when any step held water below vacuum (mode isph; nothing for a solver without
+        pressure_min)."""
+        if not math.isfinite(self.pressure_min):
+            return
+        summary.update(pressure_min=self.pressure_min, below_vacuum_steps=self.below_vacuum)
+        writer.set_attrs(pressure_min=self.pressure_min, pressure_min_time=self.pressure_min_time,
+                         below_vacuum_steps=self.below_vacuum)
+        if self.below_vacuum:
+            log.warning("water was held below vacuum in %d steps, lowest %.4g kPa (t = %.4g s): the results "
+                        "may depend on dt", self.below_vacuum, self.pressure_min / 1e3, self.pressure_min_time)
 
     def check_fields(self, step: int, time: float, fields: dict) -> None:
         """Non-finite state, density ratio of fluid particles, pore pressure of soil particles, walls at rest,

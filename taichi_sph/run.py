@@ -26,7 +26,7 @@ log = logging.getLogger("taichi_sph")
 
 DIAG_COLUMNS = ("time", "dt", "kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
                 "wall_seconds", "dt_limit", "free_surface", "collisions", "isolated", "closed_bodies",
-                "shift_substeps", "drag_sum", "drag_max")
+                "shift_substeps", "pressure_min", "drag_sum", "drag_max")
 #: columns the driver fills itself; the others come from the solver's step() (the ones its
 #: `diagnostic_names` lists, contract.Solver)
 DRIVER_COLUMNS = ("time", "dt", "wall_seconds", "dt_limit")
@@ -232,12 +232,15 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             limit_counts.update({int(k): v for k, v in saved.get("limit_counts", {}).items()})
             if courant is not None and saved.get("courant"):
                 courant.restore(saved["courant"])
+            if saved.get("tension"):
+                guard.restore_tension(saved["tension"])
 
         def driver_state() -> dict:
             """What the step loop needs to go on from a checkpoint."""
             return {"t": t, "next_out": next_out, "last": last, "volume0": volume0,
                     "limit_counts": {str(k): v for k, v in limit_counts.items()},
-                    "courant": courant.state() if courant is not None else None}
+                    "courant": courant.state() if courant is not None else None,
+                    "tension": guard.tension_state()}
 
         checkpoints.catch_sigint()
         while True:
@@ -261,7 +264,8 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                 courant.add(t, last["max_speed"] * dt / cfg.dx)
             for key, column in diag.items():
                 column.append(driver[key] if key in driver else last[key])
-            guard.after_step(solver.step_count, t, last, lambda: _fastest_particle(solver))
+            guard.after_step(solver.step_count, t, last, lambda: _fastest_particle(solver),
+                             lambda: solver.fields_by_id()["pressure"])
             fields = extras.after_step(t, lambda: _with_flag(solver.fields_by_id()))
             _observe(solver, t, extras.readings)
             frame_due = t >= next_out - 1e-9 * every
@@ -320,6 +324,8 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
                          ", ".join(f"{k} {100 * v:.1f} %" for k, v in share.items()))
         if courant is not None and courant.steps:
             courant.report(writer, summary)
+        if guard is not None:
+            guard.report_tension(writer, summary)
         if guard is not None:  # most water or air particles inside walls at one check (a resumed run: both parts)
             most = max(guard.crossed_max, int(writer.file.attrs.get("wall_crossings_max", 0)))
             summary["wall_crossings_max"] = most

@@ -225,6 +225,37 @@ def test_speed_bound_and_nan_speed():
     assert exc.exit_code == 4
 
 
+def test_water_below_vacuum_is_warned_once_and_counted(caplog):
+    """Water cannot be held in tension below vacuum (-101.325 kPa gauge, the physical limit: it cavitates
+    first). A step whose lowest water pressure is below it warns once, naming the step and the water
+    particle with the lowest pressure (a wall's pressure lower still is not taken), and every such step is
+    counted; the run file gets the lowest pressure, when, and the count. A solver that reports no
+    pressure_min (mode wcsph_biot) is not checked. Reference: the vacuum's gauge pressure."""
+    g = _guard()
+    pressures = np.array([-5.0e3, -1.2e5, -2.0e4, -9.0e5, 0.0, 0.0])  # particle 3 is a wall
+    with caplog.at_level("WARNING", logger="taichi_sph"):
+        g.after_step(1, 0.001, {"max_speed": 1.0, "pressure_min": -101.0e3}, lambda: 0, lambda: pressures)
+        assert not caplog.records  # tension above vacuum is left to the physics
+        g.after_step(2, 0.002, {"max_speed": 1.0, "pressure_min": -1.2e5}, lambda: 0, lambda: pressures)
+        g.after_step(3, 0.003, {"max_speed": 1.0, "pressure_min": -1.5e5}, lambda: 0, lambda: pressures)
+        g.after_step(4, 0.004, {"max_speed": 1.0, "pressure_min": -5.0e3}, lambda: 0, lambda: pressures)
+    assert len(caplog.records) == 1, [r.getMessage() for r in caplog.records]
+    msg = caplog.records[0].getMessage()
+    assert "step 2, t = 0.002 s" in msg and "-120 kPa" in msg and "particle id 1" in msg, msg
+    attrs, summary = {}, {}
+    g.report_tension(SimpleNamespace(set_attrs=lambda **kw: attrs.update(kw)), summary)
+    assert attrs == {"pressure_min": -1.5e5, "pressure_min_time": 0.003, "below_vacuum_steps": 2}
+    assert summary["below_vacuum_steps"] == 2
+    restored = _guard()
+    restored.restore_tension(g.tension_state())
+    assert restored.tension_state() == [-1.5e5, 0.003, 2]
+    quiet = _guard()
+    quiet.after_step(1, 0.001, {"max_speed": 1.0}, lambda: 0)
+    attrs.clear()
+    quiet.report_tension(SimpleNamespace(set_attrs=lambda **kw: attrs.update(kw)), {})
+    assert attrs == {}
+
+
 def test_out_of_domain_remove_or_error():
     out_of_domain(_cfg(), 5, 0.5, [8, 9], 2)  # remove: a warning only
     exc = _raised(lambda: out_of_domain(_cfg(out_of_domain="error"), 5, 0.5, [8, 9], 2))

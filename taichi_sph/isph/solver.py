@@ -94,7 +94,7 @@ class ISPHSolver(SolverCommon):
 
     #: the per-step diagnostics step() reports (run.DIAG_COLUMNS lists every mode's)
     diagnostic_names = ("kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual",
-                        "free_surface", "collisions", "isolated", "closed_bodies", "shift_substeps")
+                        "free_surface", "collisions", "isolated", "closed_bodies", "shift_substeps", "pressure_min")
 
     @property
     def n_fluid(self) -> int:
@@ -1309,10 +1309,11 @@ class ISPHSolver(SolverCommon):
                     self.x[i] = operators.wrap(self.x[i], self.period)
 
     @ti.kernel
-    def _k_diagnostics(self) -> ti.types.vector(7, float):
+    def _k_diagnostics(self) -> ti.types.vector(8, float):
         """Kinetic energy, max speed, water volume, count of non-finite values, first bad particle id,
-        number of free-surface particles, number of isolated water particles."""
+        number of free-surface particles, number of isolated water particles, lowest water pressure."""
         n_isolated = 0.0
+        pmin = 0.0
         ke = 0.0
         vmax = 0.0
         vol = 0.0
@@ -1326,6 +1327,7 @@ class ISPHSolver(SolverCommon):
                 s2 = u.dot(u)
                 ke += 0.5 * self.mass * s2
                 ti.atomic_max(vmax, ti.sqrt(s2))
+                ti.atomic_min(pmin, self.p[i])
                 if self.isolated[i] == 1:
                     n_isolated += 1.0
                 if self.free[i] == 1:
@@ -1337,7 +1339,7 @@ class ISPHSolver(SolverCommon):
                 if ti.math.isnan(val) or ti.math.isinf(val):
                     bad += 1.0
                     ti.atomic_min(first_bad, float(self.ids[i]))
-        return ti.Vector([ke, vmax, vol, bad, first_bad, nfree, n_isolated])
+        return ti.Vector([ke, vmax, vol, bad, first_bad, nfree, n_isolated, pmin])
 
     # ------------------------------------------------------------------ step
     def _widen_ppe(self, exc: EllOverflowError, dt: float) -> None:
@@ -1440,7 +1442,7 @@ class ISPHSolver(SolverCommon):
         self.last = {"kinetic_energy": float(d[0]), "max_speed": float(d[1]), "water_volume": float(d[2]),
                      "cg_iterations": iters, "cg_residual": res, "free_surface": int(d[5]), "isolated": int(d[6]),
                      "closed_bodies": int(self.closed_bodies[None]),
-                     "collisions": collisions, "shift_substeps": nsub}
+                     "collisions": collisions, "shift_substeps": nsub, "pressure_min": float(d[7])}
         if d[3] > 0:
             raise guard.non_finite_error(self.step_count, self.time, int(d[3]), int(d[4]),
                                          "position, velocity or pressure")
@@ -1461,7 +1463,8 @@ class ISPHSolver(SolverCommon):
         d = self._k_diagnostics().to_numpy()
         self.last = {"kinetic_energy": float(d[0]), "max_speed": float(d[1]), "water_volume": float(d[2]),
                      "cg_iterations": 0, "cg_residual": 0.0, "free_surface": int(d[5]), "isolated": int(d[6]),
-                     "closed_bodies": int(self.closed_bodies[None]), "collisions": 0, "shift_substeps": 0}
+                     "closed_bodies": int(self.closed_bodies[None]), "collisions": 0, "shift_substeps": 0,
+                     "pressure_min": float(d[7])}
         return self.last
 
     # ------------------------------------------------------------------ output
