@@ -14,7 +14,7 @@ from .run_options import ProbeName
 
 #: per-step diagnostics a metric can read (run file /diagnostics/<name>)
 MetricDiagnostic = Literal["kinetic_energy", "max_speed", "water_volume", "cg_iterations", "cg_residual", "dt",
-                           "wall_seconds", "free_surface", "collisions"]
+                           "wall_seconds", "free_surface", "collisions", "isolated", "pressure_min"]
 
 
 class Metric(Strict):
