@@ -333,7 +333,10 @@ def test_coarse_permeameter_level_does_not_depend_on_the_time_step(tmp_path):
     pressure noise dipped below zero, which uncoupled the column from the plug: +7.8 % at 0.25 ms against
     -6.5 % at 0.5 ms (16.1 points), 4.4 % of the core flagged. Bounds: the spread 3 points (the
     acceptance's); the level 8 %, the coarse plug's own error (7.4 %) and 0.6 points (11 % before); the
-    core 0.5 %."""
+    core 0.5 %. Not robust: between the grid's steps the 10 mm level has two branches, about -4 % at 0.4-0.6
+    ms (0.5 ms itself -6.3 %) and about -8 % at 0.25-0.3 and 0.75-1.1 ms, so 0.25 against 0.45 or 0.55 ms
+    would read 3.2-3.6 points apart (docs/isph.md, "The 10 mm plug's two branches"); the pair tested is the
+    validation grid's."""
     devs = {}
     for dt in (0.00025, 0.0005):
         t, h, frames, w, dx = _permeameter_run(tmp_path / f"pm_{dt}.h5", dt, "dx=0.01")
