@@ -1313,7 +1313,7 @@ class ISPHSolver(SolverCommon):
         """Kinetic energy, max speed, water volume, count of non-finite values, first bad particle id,
         number of free-surface particles, number of isolated water particles, lowest water pressure."""
         n_isolated = 0.0
-        pmin = 0.0
+        pmin = 1.0e30  # no water: reported as 0
         ke = 0.0
         vmax = 0.0
         vol = 0.0
@@ -1442,7 +1442,7 @@ class ISPHSolver(SolverCommon):
         self.last = {"kinetic_energy": float(d[0]), "max_speed": float(d[1]), "water_volume": float(d[2]),
                      "cg_iterations": iters, "cg_residual": res, "free_surface": int(d[5]), "isolated": int(d[6]),
                      "closed_bodies": int(self.closed_bodies[None]),
-                     "collisions": collisions, "shift_substeps": nsub, "pressure_min": float(d[7])}
+                     "collisions": collisions, "shift_substeps": nsub, "pressure_min": _lowest(d[7])}
         if d[3] > 0:
             raise guard.non_finite_error(self.step_count, self.time, int(d[3]), int(d[4]),
                                          "position, velocity or pressure")
@@ -1464,7 +1464,7 @@ class ISPHSolver(SolverCommon):
         self.last = {"kinetic_energy": float(d[0]), "max_speed": float(d[1]), "water_volume": float(d[2]),
                      "cg_iterations": 0, "cg_residual": 0.0, "free_surface": int(d[5]), "isolated": int(d[6]),
                      "closed_bodies": int(self.closed_bodies[None]), "collisions": 0, "shift_substeps": 0,
-                     "pressure_min": float(d[7])}
+                     "pressure_min": _lowest(d[7])}
         return self.last
 
     # ------------------------------------------------------------------ output
@@ -1515,6 +1515,11 @@ class ISPHSolver(SolverCommon):
             # saved before the cone test looked for air: every surface is open to it, as at t = 0
             state = {**state, "air_last": np.ones(self.n, np.int32)}
         restore(self, state, self.state_fields, self.state_scalars)
+
+
+def _lowest(pmin: float) -> float:
+    """The diagnostics' lowest water pressure (Pa); 0 where there was no water (the kernel's start value)."""
+    return float(pmin) if pmin < 1.0e29 else 0.0
 
 
 def ppe_width(cfg) -> int:
