@@ -89,6 +89,20 @@ def wall_mirror_solve(s, m_wall, along_equilibrium):
     return out
 
 
+@ti.func
+def wall_mirror_solve_rows(s, m_wall):
+    """`wall_mirror_solve` for each row of a matrix of gradient-like sums (row a the gradient of field
+    component a, such as the velocity gradient L_ab = d v_a / d x_b), whose wall neighbours carry the
+    field extrapolated along their faces with that gradient: L = s + L M, M = m_wall^T, so L = s (I -
+    m_wall^T)^-1. Where I - m_wall is near singular (det < 0.25) the walls add nothing along their
+    faces: s."""
+    a = ti.Matrix.identity(float, s.m) - m_wall
+    out = s
+    if ti.abs(a.determinant()) > 0.25:
+        out = s @ a.transpose().inverse()
+    return out
+
+
 @ti.data_oriented
 class WallPressure:
     """Pressure of the wall particles of solver `fl`, P_w = sum_f W_wf P_w(f) / sum_f W_wf over the fluid
