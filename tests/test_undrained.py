@@ -102,16 +102,18 @@ def test_undrained_loading_and_consolidation(run_cli, tmp_path):
     """(1) Undrained ratio at mid-depth, k = 5e-5 m/s (c_v = 6.9e-3 m^2/s: Tv = 0.0017 by 40 ms, the load
     is undrained while it rings), t_0+ = the first 40 ms, 7 ringing periods or 28 crossings of the column
     by the undrained wave. Reference: Skempton's B with the model's pore fluid (K_p = n K_f, K_f = 40 M),
-    0.976. Measured: 0.967 at dx 0.01 (dx 0.005: 0.971; cfl 0.1 instead of 0.25: 0.967); at K_f = 20 M it
+    0.976. Measured: 0.965 at dx 0.01 since the slip walls carry the soil's velocity along their faces
+    with its gradient (docs/biot.md, Terzaghi consolidation); before it 0.967 (dx 0.005: 0.971; cfl 0.1
+    instead of 0.25: 0.967); at K_f = 20 M it
     was 0.944 / 0.948 against B = 0.952. Bounds: the acceptance value 0.95, and B - 0.013, the measured
     shortfall 0.009 plus the spread between dx 0.01 and 0.005 (0.004, as at 20 M; the fit's own scatter between
     windows is 0.0015).
     (2) Dissipation, k = 5e-3 m/s, Terzaghi's c_v = k M / (rho_w g) (eq 55) = 0.686 m^2/s; the model's own
     c_v is 0.976 of it. Measured, largest |u_e / u0 - exact| over the soil (one-period means): Tv 0.1
-    0.021, Tv 0.2 0.028 (cfl 0.1: the same to 1e-4), the model above the exact: it decays a little slower
-    (the drained face's kernel-wide zone, docs/biot.md; at 20 M the smaller B hid part of it: 0.039 /
-    0.020). Bounds 0.03 and 0.035: the measured error plus 0.005 of u0 (the ringing left in a one-period
-    mean) and rounding up."""
+    0.0075, Tv 0.2 0.0061 since the slip walls' change (before it 0.021 / 0.028, the model above the exact:
+    the layer beside the walls was softer and decayed slower; cfl 0.1: the same to 1e-4; at 20 M the
+    smaller B hid part of it: 0.039 / 0.020). Bound 0.015 at both: the measured error plus 0.005 of u0 (the
+    ringing left in a one-period mean) and rounding up."""
     stage1 = _stage1(run_cli, tmp_path)
 
     k_slow = 5e-5
@@ -127,5 +129,5 @@ def test_undrained_loading_and_consolidation(run_cli, tmp_path):
     cv = consolidation_coefficient(k, E, NU)
     t, y, ue = _loaded_and_twin(run_cli, tmp_path, stage1, k, 0.125)
     err = dissipation_errors(t, y, ue, cv, (0.1, 0.2))
-    assert err[0.1] < 0.03, err
-    assert err[0.2] < 0.035, err
+    assert err[0.1] < 0.015, err
+    assert err[0.2] < 0.015, err
