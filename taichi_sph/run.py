@@ -326,7 +326,7 @@ def run(cfg, out_path: str | None = None, arch: str | None = None, progress: boo
             courant.report(writer, summary)
         if guard is not None:
             guard.report_tension(writer, summary)
-        if guard is not None:  # most water or air particles inside walls at one check (a resumed run: both parts)
+            # most water or air particles inside walls at one check (a resumed run: both parts)
             most = max(guard.crossed_max, int(writer.file.attrs.get("wall_crossings_max", 0)))
             summary["wall_crossings_max"] = most
             writer.set_attrs(wall_crossings_max=most)

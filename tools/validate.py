@@ -442,8 +442,8 @@ TERZAGHI = {"u0": 500.0, "half": 0.4, "soil_top": 0.2, "k": 5e-3, "E": 1.0e6, "n
 def _terzaghi(setting):
     # configs/consolidation.yaml in a tank 0.04 m wide in the small setting (2, 3 and 4 particle columns: the
     # widths that every dx divides along with the soil's 0.2 m and the water's 0.24 m) and the config's 0.05 m
-    # in the full one (5, 10 and 20 columns; the finest is within the 0.03 target from dx 0.005 on, the
-    # small setting's narrow tank is not); each run has a twin without the excess, run by evaluate (u_e is
+    # in the full one (5, 10 and 20 columns; every one within the 0.03 target since the slip walls carry the
+    # soil's velocity along their faces, docs/biot.md); each run has a twin without the excess, run by evaluate (u_e is
     # the difference of the two)
     dxs = (0.02, 0.04 / 3, 0.01) if setting == "small" else (0.01, 0.005, 0.0025)
     width = 0.04 if setting == "small" else 0.05
@@ -677,11 +677,13 @@ DIAGNOSES = {
                 "0.27 in T fits both Martin & Moyce series within 4 % at a/40), so the error against the raw data "
                 "does not go to zero with dx. The two modes agree within 1.8 % at a/40 (docs/isph.md, "
                 "\"Dam-break front\").",
-    "terzaghi": "the run decays a little slower than c_v says (order 0.5-1): the drained face is a "
-                "kernel-wide zone where the drag fades (about one smoothing length more drainage path), and "
-                "the side walls weigh most in narrow tanks (the small setting's is 2-4 particles wide: 0.066 "
-                "/ 0.056 / 0.042 at dx 0.02 / 0.0133 / 0.01; the full setting's 0.05 m tank, 5-20 columns: "
-                "0.034 / 0.021 / 0.014 at dx 0.01 / 0.005 / 0.0025; docs/biot.md, Terzaghi consolidation).",
+    "terzaghi": "the largest error is the early isochrone (Tv 0.05) at the drained face, a kernel-wide zone "
+                "where the drag fades (about one smoothing length more drainage path): 0.012 / 0.010 / 0.010 at "
+                "dx 0.01 / 0.005 / 0.0025 in the full setting's 0.05 m tank, so the fitted order is near 0 while "
+                "Tv 0.1 converges (0.0087 / 0.0058 / 0.0034). Before the slip walls carried the soil's velocity "
+                "along their faces (2026-11-28) the side walls softened the layer and weighed most in narrow "
+                "tanks: 0.034 / 0.021 / 0.014 in the full setting, 0.066 / 0.056 / 0.042 in the small "
+                "setting's 2-4 columns (docs/biot.md, Terzaghi consolidation).",
     "critical_gradient": "converging since the kernel gradient is normalised to the lattice (docs/biot.md, Critical "
                          "gradient): before, the water's pressure force, the soil's pore term and its stress "
                          "divergence each read 0.99 of the exact gradient in different proportions, and the "

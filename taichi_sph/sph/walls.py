@@ -76,6 +76,11 @@ def wall_pressure_along_face(p_i, rho_w, g, grad_t, n_w, d):
     return p_i + rho_w * g.dot(n_w) * dn + grad_t.dot(d - dn * n_w)
 
 
+#: below this |det(I - m_wall)| the mirror solves do not invert (a particle with walls over most of its
+#: support, in a corner): the walls then carry no extrapolation along their faces
+MIRROR_DET_MIN = 0.25
+
+
 @ti.func
 def wall_mirror_solve(s, m_wall, along_equilibrium):
     """Gradient-like sum G = s + m_wall G of a particle whose wall neighbours carry the mirror image of
@@ -84,7 +89,7 @@ def wall_mirror_solve(s, m_wall, along_equilibrium):
     gradient along their faces too: s + along_equilibrium, the same terms with that gradient."""
     a = ti.Matrix.identity(float, s.n) - m_wall
     out = s + along_equilibrium
-    if ti.abs(a.determinant()) > 0.25:
+    if ti.abs(a.determinant()) > MIRROR_DET_MIN:
         out = a.inverse() @ s
     return out
 
@@ -98,7 +103,7 @@ def wall_mirror_solve_rows(s, m_wall):
     faces: s."""
     a = ti.Matrix.identity(float, s.m) - m_wall
     out = s
-    if ti.abs(a.determinant()) > 0.25:
+    if ti.abs(a.determinant()) > MIRROR_DET_MIN:
         out = s @ a.transpose().inverse()
     return out
 
