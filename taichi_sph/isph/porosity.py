@@ -85,6 +85,44 @@ def falling_head_level(h0, length, eps, d50, t_end, nu=1.0e-6, g=9.81, alpha_c=1
     return lambda t: sol(t)[0]
 
 
+def penetration_front(h0, depth, eps, d50, t_end=5.0, nu=1.0e-6, g=9.81, alpha_c=1000.0, beta_c=1.1):
+    """One-dimensional reference for water of height h0 released on dry ground of porosity eps and
+    thickness `depth` (the seed's free fall, seed 000 section 5, without its tank's walls): a sharp front
+    at depth z below the ground's surface, the ground saturated behind it, atmospheric pressure at the
+    water's top and at the front (no capillarity). The column above the ground (height h, velocity vD) and
+    the pore water behind the front (eq 8 with the Darcy velocity vD, which is continuous across the
+    ground's surface) move together:
+
+        (h + Cr z) dvD/dt = g (h + z) - eps z (a vD + b vD^2),   dh/dt = -vD,   dz/dt = vD / eps,
+
+    from rest with z = 0 (free fall until the front has entered), a, b, Cr of eq 9a-d: the falling-head
+    balance (falling_head_level) with a plug that grows as the front advances. Returns (z, arrival): z(t)
+    as a callable on [0, arrival] (the front's depth), and the time the front reaches `depth`; at that
+    moment eps depth / h0 of the water is in the ground. Arrival is inf where the column has gone into the
+    ground first (h0 < eps depth) or not by t_end."""
+    from scipy.integrate import solve_ivp
+
+    a = linear_drag_np(eps, nu, d50, alpha_c)
+    b = quadratic_drag_np(eps, d50, beta_c)
+    cr = 1.0 + 0.34 * (1.0 - eps) / eps
+
+    def rhs(_t, y):
+        h, z, v = y
+        return [-v, v / eps, (g * (h + z) - eps * z * (a * v + b * v * abs(v))) / (h + cr * z)]
+
+    def reached(_t, y):
+        return y[1] - depth
+
+    def emptied(_t, y):  # the column has gone into the ground: a slug, which this balance does not hold
+        return y[0]
+
+    reached.terminal = emptied.terminal = True
+    sol = solve_ivp(rhs, (0.0, t_end), [h0, 0.0, 0.0], events=(reached, emptied), dense_output=True,
+                    rtol=1e-10, atol=1e-12)
+    arrival = float(sol.t_events[0][0]) if len(sol.t_events[0]) else float("inf")
+    return (lambda t: float(sol.sol(t)[1])), arrival
+
+
 def column_level(z, base, dx):
     """Height above `base` of the free surface of a water column whose particles sit at heights z: the
     mean height of its top row (within dx / 2 of the highest particle) plus dx / 2, the top of those
