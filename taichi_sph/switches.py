@@ -53,6 +53,8 @@ class Switches:
                                                    "drained ground, that the pressure equation holds in tension "
                                                    "becomes free surface (isph.ground_surface_tension, "
                                                    "isph.ground_tension_fill)")
+    ground_drained: bool | None = _switch((ISPH,), "with the cone: drained pore water is a candidate of the cone "
+                                                   "test (isph.ground_drained_candidate)")
     air_entry: bool | None = _switch((ISPH,), "pore water's suction clamped at the ground's air-entry value "
                                               "(porous ground and isph.air_entry_suction)")
     ground_correction: bool | None = _switch((ISPH,), "the kernel-gradient correction also inside saturated porous ground of weak drag "
@@ -104,6 +106,8 @@ class Switches:
                        ground_cone=bool(scene.markers) and i.ground_surface_cone > 0.0,
                        ground_tension=bool(scene.markers) and i.ground_surface_cone > 0.0
                        and i.ground_surface_tension,
+                       ground_drained=bool(scene.markers) and i.ground_surface_cone > 0.0
+                       and i.ground_drained_candidate,
                        air_entry=bool(scene.markers) and i.air_entry_suction is not None,
                        ground_correction=bool(scene.markers) and i.gradient == "corrected"
                        and i.ground_gradient_correction,

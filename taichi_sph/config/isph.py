@@ -113,6 +113,14 @@ class ISPH(Strict):
     #: its rest density under -0.5 to -2.8 kPa, and the volume measure ended +5..+7 % at dx 2 cm. 0 =
     #: free water only (docs/isph.md, "Air into drained pores")
     ground_tension_fill: Annotated[float, Field(ge=0, lt=1)] = 0.9
+    #: with the cone test: pore water (eps < 1) whose <rho> is below ground_tension_fill of its rest value
+    #: is a candidate of that test, whatever eq 34's count says. A front that enters dry ground as a sheet
+    #: at the free water's spacing passes the count, which is scaled to the pore lattice, and as an
+    #: interior row its deficit was pulled on by eq 31's term at a pressure growing as alpha / dt^2: the
+    #: free fall's eps0 0.8 front arrived 16 % early at dt 0.5 ms (dx 1 cm). The cone still decides, so
+    #: saturated pore water and a plug's face are not flagged. false = the count's candidates alone
+    #: (docs/isph.md, "Drained pore water a candidate of the cone")
+    ground_drained_candidate: bool = True
     #: with the cone test (ground_surface_cone > 0), in and next to porous ground: a particle whose
     #: number density <rho> is below this fraction of its rest value (eps rho_w) is free surface
     #: whatever its cone. Ground that drains holds its water in scattered pores with air between

@@ -142,6 +142,8 @@ class ISPHSolver(SolverCommon):
         # free water next to the ground held in tension becomes free surface (_k_tension)
         self.ground_tension = sw.ground_tension
         self.tension_fill = float(cfg.isph.ground_tension_fill)
+        # drained pore water is a candidate of the cone test (_k_surface_cone)
+        self.drained_candidate = sw.ground_drained
         # kernel-gradient correction in the ground (L_i = M_i^-1 where eps_i < 1), else plain eq 12 there
         self.ground_correction = sw.ground_correction
         #: candidate of the cone test (in or next to the ground): eq 34's count or the plain count marks it,
@@ -629,7 +631,11 @@ class ISPHSolver(SolverCommon):
         (the outer half of a face's ramp, where eq 32 still gives eps 1 but the pore water below is
         sparse) is a candidate when eq 34's count marked it free, or (in free water) when the plain count
         of its neighbours is below N_surf: below a plug's exit face the filled-volume count reads the pore
-        water as full, so water hanging there was never free and sucked on the plug. A candidate is free
+        water as full, so water hanging there was never free and sucked on the plug. In the ground it is a
+        candidate too where it has drained, <rho_i> below isph.ground_tension_fill of its rest value
+        (isph.ground_drained_candidate): a front entering dry ground as a sheet at the free water's spacing
+        passes the count, and held as an interior row its deficit was pulled on by eq 31's term (docs/isph.md,
+        "Drained pore water a candidate of the cone"). A candidate is free
         surface only if no neighbour (water, or a wet wall) lies within the cone of half-angle
         `isph.ground_surface_cone` about its outward normal n_i = -sum_j V_j grad W_ij (V_j the bulk
         volume m / (eps_j rho_w), dx^d for a wall): the scan-region test of Marrone et al. (2010, J.
@@ -669,6 +675,9 @@ class ISPHSolver(SolverCommon):
                     candidate = self.free[i] == 1
                     if self.eps[i] >= 1.0 and plain < self.n_surf:
                         candidate = True
+                    if ti.static(self.drained_candidate):  # noqa: SIM102 (compile-time if)
+                        if self.eps[i] < 1.0 and self.rho_n[i] < self.tension_fill * self._rest_density(i):
+                            candidate = True
                     if candidate:
                         self.candidate[i] = 1
                     is_free = 0
