@@ -204,9 +204,12 @@ PERMEAMETER_END = 0.44  # s: the ODE's level falls from 0.2 to 0.1 m (the first 
 PERMEAMETER_SPREAD = 0.03  # bound on the spread over dt at one dx
 #: what runs at other fixed steps than the grid's showed, by dx (measured 2026-11-28, one thread; docs/isph.md)
 PERMEAMETER_SPREAD_NOTES = {
-    0.01: "not robust: at the steps between, the level reads -7.2 % at 0.3 ms, -4.2 / -4.3 / -3.9 / -3.7 % at "
-          "0.4 / 0.45 / 0.55 / 0.6 ms and -8.2 / -8.1 / -7.5 % at 0.75 / 0.9 / 1.1 ms: two branches 4.5 points "
-          "apart, and 0.5 ms (-6.3 %) sits between them (docs/isph.md, \"The 10 mm plug's two branches\")",
+    0.01: "the level has two branches about 4.5 points apart over dt, near -4 % (0.4-0.75 ms) and near -8 % "
+          "(0.25-0.3 and 0.9-1.1 ms); eq 31's stabilisation sets them (with alpha 0: -4.4 / -5.2 / -5.4 % at 1 / "
+          "0.25 / 0.5 ms). The spread of 1.9 points read here before drained pore water became a candidate of "
+          "the cone test held only at the exact spacing: with dx moved by a part in 10^7 that code's 0.5 ms "
+          "run reads -4.2..-4.5 % instead of -6.3 % (docs/isph.md, \"The 10 mm plug's two branches\" and "
+          "\"Drained pore water a candidate of the cone\")",
 }
 
 
