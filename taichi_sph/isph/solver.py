@@ -976,7 +976,10 @@ class ISPHSolver(SolverCommon):
         """Free water next to the ground that the PPE holds in tension becomes free surface: a candidate of
         the cone test (short of neighbours, but a neighbour in its cone) in free water (eps_i = 1) whose
         solved pressure is below the atmosphere's (P < 0) and which has a free-surface water particle
-        within its support. Without capillarity water cannot be pulled: air enters where the projection
+        within its support, or was free surface itself at the end of the last step (air_last: the air that
+        was at it stays while the water there is pulled; a drop hanging under the free fall's layer in a
+        corner, its cones blocked by the walls it wets, lost every free-surface row in one step and was
+        pulled at -182 kPa). Without capillarity water cannot be pulled: air enters where the projection
         would hold a thinning sheet together, but only from the air, through the surface: water with no
         surface in its support (the bottom of a column standing on a saturated plug, short of neighbours
         only because the pore water below it is sparse) is closed to the air and keeps its tension, which
@@ -995,6 +998,8 @@ class ISPHSolver(SolverCommon):
                     open_to_air = self.rho_n[i] < self.tension_fill * self._rest_density(i)
             if self.solve_mask[i] == 1 and self.free[i] == 0 and self.candidate[i] == 1 and open_to_air:
                 if psol[self.row[i]] < 0.0:
+                    if self.air_last[i] == 1:  # air was at it at the end of the last step: it stays
+                        self.air_entry_now[i] = 1
                     for k in range(self.grid.nbr_count[i]):
                         j = self.grid.nbr[i, k]
                         if self.kind[j] == WATER and self.free[j] == 1:
