@@ -536,26 +536,28 @@ def test_freefall_coarse_seeps_in_as_the_one_dimensional_front(freefall_coarse, 
     together, (h + Cr z) dvD/dt = g (h + z) - eps z (a vD + b vD^2), atmospheric pressure at the top and at
     the front), up to the front's arrival at the layer's bottom (0.391 / 0.324 / 0.250 s for eps0 0.3 /
     0.5 / 0.8; the seed reports 0.42 / 0.34 / 0.26 s), at dt 1 and 0.5 ms. That front has no walls and no
-    spread, and at 2 cm one row of the cube is 0.1 of the water. Measured, largest deviation of the share
-    below the layer's top (frames every 5 ms) at dt 1 / 0.5 ms: eps0 0.3 +0.051 / +0.058, eps0 0.5
-    +0.062 / +0.052, eps0 0.8 +0.051 / +0.061 (at the seed's dx 1 cm at most 0.033; docs/freefall.md,
-    "Against the one-dimensional front"). The positive peak comes at 0.04 s, when the cube's bottom row
-    has crossed the layer's top as one and the front has taken in 0.05 of the water: the count of
-    particle centres moves by rows. Later the share lags the front by up to 0.053, the walls' friction.
-    Bound 0.07: near the measured 0.062, and below the 0.1 of a row that a front one row early or late
-    would give. Before drained pore water became a candidate of the cone test (isph.ground_drained_candidate)
+    spread, and at 2 cm one row of the cube is 0.1 of the water. The test runs the porosities at the two
+    ends, eps0 0.3 and 0.8. Measured, largest deviation of the share below the layer's top at dt 1 / 0.5
+    ms, frames every 10 ms (the fixture's every 20 ms): eps0 0.3 -0.035 / +0.051, eps0 0.8 +0.048 / +0.061
+    (frames every 5 ms: +0.051 / +0.058 and -0.051 / +0.061; eps0 0.5, not run here, +0.062 / +0.052; at
+    the seed's dx 1 cm at most 0.034; docs/freefall.md, "Against the one-dimensional front"). The positive
+    peak comes at 0.04 s, when the cube's bottom row has crossed the layer's top as one and the front has
+    taken in 0.05 of the water: the count of particle centres moves by rows. Later the share lags the
+    front by up to 0.053, the walls' friction. Bound 0.07: near the measured 0.061, and below the 0.1 of a
+    row that a front one row early or late would give. Before drained pore water became a candidate of
+    the cone test (isph.ground_drained_candidate)
     eps0 0.8 read +0.065 / +0.167: its front, undetected as it entered the ground as a sheet, was pulled
     through the layer by eq 31's term, the more so the smaller the step (docs/freefall.md, "Small fixed
     steps")."""
     coarse, r = freefall_coarse
     assert r.returncode == 0, r.stderr
     runs = {(0.3, 0.001): coarse}
-    for eps0, dt in ((0.3, 0.0005), (0.5, 0.001), (0.5, 0.0005), (0.8, 0.001), (0.8, 0.0005)):
+    for eps0, dt in ((0.3, 0.0005), (0.8, 0.001), (0.8, 0.0005)):
         out = tmp_path / f"ff_{eps0}_{dt}.h5"
-        end = {0.3: 0.40, 0.5: 0.33, 0.8: 0.26}[eps0]  # past the 1D front's arrival
+        end = {0.3: 0.40, 0.8: 0.26}[eps0]  # past the 1D front's arrival
         r = run_cli("--config", "configs/freefall.yaml", "--variant", "coarse", "--set", f"dt={dt}",
                     "--set", f"soil.regions.0.eps0={eps0}", "--set", f"end_time={end}", "--set",
-                    "output.every=0.005", "--out", out, "--no-progress")
+                    "output.every=0.01", "--out", out, "--no-progress")
         assert r.returncode == 0, r.stderr
         runs[(eps0, dt)] = out
     devs = {}
