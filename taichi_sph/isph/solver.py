@@ -676,7 +676,7 @@ class ISPHSolver(SolverCommon):
                     if self.eps[i] >= 1.0 and plain < self.n_surf:
                         candidate = True
                     if ti.static(self.drained_candidate):  # noqa: SIM102 (compile-time if)
-                        if self.eps[i] < 1.0 and self.rho_n[i] < self.tension_fill * self._rest_density(i):
+                        if self._drained(i):
                             candidate = True
                     if candidate:
                         self.candidate[i] = 1
@@ -758,6 +758,13 @@ class ISPHSolver(SolverCommon):
         if ti.static(self.porous):
             out *= self.rest_fill[i]
         return out
+
+    @ti.func
+    def _drained(self, i):
+        """Pore water (eps_i < 1) that has let air into its pores: <rho_i> below isph.ground_tension_fill of
+        its rest value. It is a candidate of the cone test (_k_surface_cone) and takes the tension rule
+        (_k_tension)."""
+        return self.eps[i] < 1.0 and self.rho_n[i] < self.tension_fill * self._rest_density(i)
 
     @ti.kernel
     def _k_rest_fill(self):
@@ -995,7 +1002,7 @@ class ISPHSolver(SolverCommon):
             open_to_air = self.eps[i] >= 1.0
             if ti.static(self.porous):
                 if self.eps[i] < 1.0:
-                    open_to_air = self.rho_n[i] < self.tension_fill * self._rest_density(i)
+                    open_to_air = self._drained(i)
             if self.solve_mask[i] == 1 and self.free[i] == 0 and self.candidate[i] == 1 and open_to_air:
                 if psol[self.row[i]] < 0.0:
                     if self.air_last[i] == 1:  # air was at it at the end of the last step: it stays
