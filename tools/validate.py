@@ -328,7 +328,7 @@ def _freefall(setting):
 
     def evaluate(path, run):
         from taichi_sph.io.hdf5 import RunFile
-        from taichi_sph.isph.porosity import penetration_front
+        from taichi_sph.isph.porosity import share_against_front
 
         eps0 = float(run.variant.split(",")[0].split()[1])
         with RunFile(path) as rf:
@@ -347,14 +347,14 @@ def _freefall(setting):
             drift = float(d["water_volume"][-1] / d["water_volume"][0] - 1)
             # the 1D front of the seed's equations (no walls, a sharp front): the water it has taken into
             # the layer, eps0 z(t) / h0, against the share of the particles below the layer's top
-            z_front, front_arrival = penetration_front(0.2, LAYER[1] - LAYER[0], eps0, 0.01)
-            entered = [float(np.mean(rf.field("position", i)[water & rf.field("active", i)][:, -1] < LAYER[1]))
-                       - eps0 * z_front(ti) / 0.2 for i, ti in enumerate(t) if ti <= front_arrival]
+            entered, front_arrival, _ = share_against_front(
+                t, lambda i: float(np.mean(rf.field("position", i)[water & rf.field("active", i)][:, -1] < LAYER[1])),
+                0.2, LAYER[1] - LAYER[0], eps0, 0.01)
         ref = FREEFALL_ARRIVAL[eps0]
         return {"error": abs(arrival / ref - 1) if np.isfinite(arrival) else float("inf"), "arrival s": arrival,
                 "fraction in layer": frac, "fraction - eps0": frac - eps0, "volume drift": drift,
                 "arrival / 1D front - 1": arrival / front_arrival - 1,
-                "entered - 1D front": entered[int(np.argmax(np.abs(entered)))]}
+                "entered - 1D front": entered}
 
     return runs, evaluate
 

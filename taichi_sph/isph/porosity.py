@@ -123,6 +123,16 @@ def penetration_front(h0, depth, eps, d50, t_end=5.0, nu=1.0e-6, g=9.81, alpha_c
     return (lambda t: float(sol.sol(t)[1])), arrival
 
 
+
+def share_against_front(times, share, h0, depth, eps, d50):
+    """A run against penetration_front: the signed largest of share(k) - eps z(t_k) / h0 over the times
+    t_k = times[k] up to the front's arrival, where share(k) is the run's share of the water that has
+    entered the ground at t_k (called only for those times) and eps z / h0 the front's. Returns (that
+    deviation, the front's arrival, how many times were compared)."""
+    z, arrival = penetration_front(h0, depth, eps, d50)
+    dev = [share(k) - eps * z(t) / h0 for k, t in enumerate(times) if t <= arrival]
+    return (dev[int(np.argmax(np.abs(dev)))] if dev else float("nan")), arrival, len(dev)
+
 def column_level(z, base, dx):
     """Height above `base` of the free surface of a water column whose particles sit at heights z: the
     mean height of its top row (within dx / 2 of the highest particle) plus dx / 2, the top of those
