@@ -99,13 +99,9 @@ def wall_mirror_solve_rows(s, m_wall):
     """`wall_mirror_solve` for each row of a matrix of gradient-like sums (row a the gradient of field
     component a, such as the velocity gradient L_ab = d v_a / d x_b), whose wall neighbours carry the
     field extrapolated along their faces with that gradient: L = s + L M, M = m_wall^T, so L = s (I -
-    m_wall^T)^-1. Where I - m_wall is near singular (det < 0.25) the walls add nothing along their
-    faces: s."""
-    a = ti.Matrix.identity(float, s.m) - m_wall
-    out = s
-    if ti.abs(a.determinant()) > MIRROR_DET_MIN:
-        out = s @ a.transpose().inverse()
-    return out
+    m_wall^T)^-1, the transpose of `wall_mirror_solve` on s^T. Where I - m_wall is near singular
+    (det < 0.25) the walls add nothing along their faces: s."""
+    return wall_mirror_solve(s.transpose(), m_wall, ti.Matrix.zero(float, s.m, s.n)).transpose()
 
 
 @ti.data_oriented
