@@ -120,6 +120,10 @@ def penetration_front(h0, depth, eps, d50, t_end=5.0, nu=1.0e-6, g=9.81, alpha_c
     sol = solve_ivp(rhs, (0.0, t_end), [h0, 0.0, 0.0], events=(reached, emptied), dense_output=True,
                     rtol=1e-10, atol=1e-12)
     arrival = float(sol.t_events[0][0]) if len(sol.t_events[0]) else float("inf")
+    if not len(sol.t_events[0]) and len(sol.t_events[1]) and sol.y_events[1][0][1] >= depth * (1.0 - 1e-9):
+        # the column empties as the front arrives (h0 = eps depth: the events coincide, and which of the
+        # two the solver finds first is rounding): the front has reached the bottom
+        arrival = float(sol.t_events[1][0])
     return (lambda t: float(sol.sol(t)[1])), arrival
 
 
