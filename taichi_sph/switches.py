@@ -53,6 +53,9 @@ class Switches:
                                                    "drained ground, that the pressure equation holds in tension "
                                                    "becomes free surface (isph.ground_surface_tension, "
                                                    "isph.ground_tension_fill)")
+    tension_memory: bool | None = _switch((ISPH,), "with the tension rule: a candidate in tension that was free "
+                                                   "surface at the end of the last step is freed again "
+                                                   "(isph.ground_tension_memory)")
     ground_drained: bool | None = _switch((ISPH,), "with the cone: drained pore water is a candidate of the cone "
                                                    "test (isph.ground_drained_candidate)")
     air_entry: bool | None = _switch((ISPH,), "pore water's suction clamped at the ground's air-entry value "
@@ -106,6 +109,8 @@ class Switches:
                        ground_cone=bool(scene.markers) and i.ground_surface_cone > 0.0,
                        ground_tension=bool(scene.markers) and i.ground_surface_cone > 0.0
                        and i.ground_surface_tension,
+                       tension_memory=bool(scene.markers) and i.ground_surface_cone > 0.0
+                       and i.ground_surface_tension and i.ground_tension_memory,
                        ground_drained=bool(scene.markers) and i.ground_surface_cone > 0.0
                        and i.ground_drained_candidate,
                        air_entry=bool(scene.markers) and i.air_entry_suction is not None,

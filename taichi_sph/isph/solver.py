@@ -142,6 +142,8 @@ class ISPHSolver(SolverCommon):
         # free water next to the ground held in tension becomes free surface (_k_tension)
         self.ground_tension = sw.ground_tension
         self.tension_fill = float(cfg.isph.ground_tension_fill)
+        # a candidate in tension that was free surface at the end of the last step is freed again
+        self.tension_memory = sw.tension_memory
         # drained pore water is a candidate of the cone test (_k_surface_cone)
         self.drained_candidate = sw.ground_drained
         # kernel-gradient correction in the ground (L_i = M_i^-1 where eps_i < 1), else plain eq 12 there
@@ -983,11 +985,12 @@ class ISPHSolver(SolverCommon):
         """Free water next to the ground that the PPE holds in tension becomes free surface: a candidate of
         the cone test (short of neighbours, but a neighbour in its cone) in free water (eps_i = 1) whose
         solved pressure is below the atmosphere's (P < 0) and which has a free-surface water particle
-        within its support, or was free surface itself at the end of the last step (air_last: the air that
-        was at it stays while the water there is pulled; a drop hanging under the free fall's layer in a
-        corner, its cones blocked by the walls it wets, lost every free-surface row in one step and was
-        pulled at -182 kPa). Without capillarity water cannot be pulled: air enters where the projection
-        would hold a thinning sheet together, but only from the air, through the surface: water with no
+        within its support, or was free surface itself at the end of the last step (air_last, with
+        isph.ground_tension_memory: the air that was at it stays while the water there is pulled; a drop
+        hanging under the free fall's layer in a corner, its cones blocked by the walls it wets, lost every
+        free-surface row in one step and was pulled at -182 kPa). Without capillarity water cannot be
+        pulled: air enters where the projection would hold a thinning sheet together, but only from the
+        air, through the surface: water with no
         surface in its support (the bottom of a column standing on a saturated plug, short of neighbours
         only because the pore water below it is sparse) is closed to the air and keeps its tension, which
         there is the transient of discrete particles entering the pores (docs/isph.md, "Surface test in the
@@ -1005,8 +1008,9 @@ class ISPHSolver(SolverCommon):
                     open_to_air = self._drained(i)
             if self.solve_mask[i] == 1 and self.free[i] == 0 and self.candidate[i] == 1 and open_to_air:
                 if psol[self.row[i]] < 0.0:
-                    if self.air_last[i] == 1:  # air was at it at the end of the last step: it stays
-                        self.air_entry_now[i] = 1
+                    if ti.static(self.tension_memory):  # noqa: SIM102 (compiled only with the switch)
+                        if self.air_last[i] == 1:  # air was at it at the end of the last step: it stays
+                            self.air_entry_now[i] = 1
                     for k in range(self.grid.nbr_count[i]):
                         j = self.grid.nbr[i, k]
                         if self.kind[j] == WATER and self.free[j] == 1:
