@@ -4,8 +4,11 @@ Usage: python tools/freefall_report.py RUN.h5 [RUN.h5 ...]
 
 For each run: dx, dt, eps0 and alpha from the stored config; the time when the lowest water
 particle reaches the bottom of the layer (interpolated between frames; the seed reads 0.42 / 0.34 /
-0.26 s for eps0 0.3 / 0.5 / 0.8); the fraction of the water inside the layer at that moment (seed:
-about eps0); the water volume measure (sum of m eps / <rho>, docs/output.md) against t = 0 at
+0.26 s for eps0 0.3 / 0.5 / 0.8); the water body's arrival, when the share of the water below the
+layer's top first reaches eps0 times the layer's depth over the block's height
+(porosity.bulk_front_arrival: the 1D front's arrival, where the seed reads about eps0 of the water in
+the layer); the fraction of the water inside the layer when the lowest particle arrives (seed: about
+eps0); the water volume measure (sum of m eps / <rho>, docs/output.md) against t = 0 at
 arrival, its lowest and highest value over the run and its mean over the last 0.25 s (the last
 sample alone scatters with the sloshing pool); the water still inside the layer at the end; the
 bottom pressure at the end against hydrostatic, and the pool's vertical pressure gradient against
@@ -27,6 +30,7 @@ import numpy as np
 import yaml
 
 from taichi_sph.io.hdf5 import RunFile
+from taichi_sph.isph.porosity import bulk_front_arrival
 from validate import FREEFALL_ARRIVAL  # the seed's arrival times (tools/ is this script's folder)
 
 
@@ -36,13 +40,17 @@ def analyse(path):
         region = cfg["soil"]["regions"][0]
         z_lo, z_hi = region["min"][-1], region["max"][-1]
         water = rf.kind == 0
-        times, zmin, frac = rf.times, [], []
+        times, zmin, frac, entered = rf.times, [], [], []
         for i in range(rf.n_frames):
             f = rf.frame(i)
             z = f["position"][water & f["active"]][:, -1]
             zmin.append(z.min())
             frac.append(np.mean((z >= z_lo) & (z <= z_hi)))
+            entered.append(np.mean(z < z_hi))
         zmin, frac = np.array(zmin), np.array(frac)
+        block = cfg["water"][0]
+        body = bulk_front_arrival(times, entered, float(region["eps0"]), z_hi - z_lo,
+                                  float(block["max"][-1]) - float(block["min"][-1]))
         k = int(np.argmax(zmin < z_lo)) if np.any(zmin < z_lo) else None
         arrival = frac_at = None
         if k:
@@ -72,7 +80,7 @@ def analyse(path):
         return {
             "run": str(path), "dx": rf.dx, "dt": float(cfg["dt"]), "eps0": region["eps0"],
             "alpha": cfg.get("isph", {}).get("alpha", 0.01),
-            "arrival_s": arrival, "fraction_in_layer": frac_at, "drift_at_arrival": drift_arrival,
+            "arrival_s": arrival, "body_arrival_s": body, "fraction_in_layer": frac_at, "drift_at_arrival": drift_arrival,
             "drift_min": float(vol.min()), "t_min": float(t[np.argmin(vol)]),
             "drift_max": float(vol.max()), "t_max": float(t[np.argmax(vol)]),
             "drift_end": float(vol[settled].mean()),
@@ -103,7 +111,8 @@ def row(r):
         f"{r['bottom_pressure_Pa'] / r['hydrostatic_Pa'] - 1:+.1%}")
     finished = "yes" if r["finished"] else f"stopped at {r['end_s']:.2f} s"
     return (f"| {r['dx']:g} | {r['dt'] * 1e3:g} ms | {r['eps0']:g} | {r['alpha']:g} | {r['options']} | "
-            f"{fmt(r['arrival_s'], '.3f')} ({fmt(seed, 'g')}) | {fmt(r['fraction_in_layer'], '.3f')} | "
+            f"{fmt(r['arrival_s'], '.3f')} ({fmt(seed, 'g')}) | {fmt(r['body_arrival_s'], '.3f')} | "
+            f"{fmt(r['fraction_in_layer'], '.3f')} | "
             f"{fmt(r['drift_at_arrival'], '+.1%')} | {r['drift_min']:+.1%} ({r['t_min']:.2f} s) | "
             f"{r['drift_max']:+.1%} ({r['t_max']:.2f} s) | {fmt(r['drift_end'], '+.1%')} | "
             f"{fmt(r['in_layer_end'], '.1%')} | {pressure} | {fmt(r['pool_gradient'], '.3f')} | "
@@ -111,6 +120,7 @@ def row(r):
 
 
 HEADER = ("| dx (m) | dt | eps0 | alpha | shifting / collisions / advection | arrival (s) (seed) | "
+          "water body's arrival (s) | "
           "water in layer at arrival | volume at arrival | "
           "volume lowest (t) | volume highest (t) | volume at end | in layer at end | "
           "bottom pressure vs hydrostatic | pool dP/dz / (rho_w g) | largest speed m/s (t) | finished | "
