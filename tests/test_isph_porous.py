@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from taichi_sph.io.hdf5 import RunFile
+from taichi_sph.kinds import WALL, WATER
 
 from .conftest import ROOT, cli
 
@@ -353,6 +354,70 @@ def test_coarse_permeameter_level_does_not_depend_on_the_time_step(tmp_path):
     n = min(len(d) for d in devs.values())
     spread = float(np.max(np.abs(devs[0.00025][:n] - devs[0.0005][:n])))
     assert spread < 0.03, spread
+
+
+def test_pore_support_permeameter_level_does_not_depend_on_the_time_step(tmp_path):
+    """The 10 mm permeameter (six pore particles a row) with eq 31's stabilisation read over the pore
+    lattice's support (isph.ground_density_support: pore) at dt 0.5 and 1 ms: the level against the
+    falling-head ODE with inertia over the first half. Measured (one thread): -6.7 / -7.4 %, at one time at
+    most 0.7 points apart; with dx moved by 1e-5 of itself -6.7 / -6.8..-7.1 %; with the pore sum's cells
+    taken in another order (round-off) the 1 ms run read -9.2 %, 2.6 points from 0.5 ms. The default
+    support reads -4.0 / -8.7 % here (4.7 points: its plug on one of two branches). Over 0.25-1.1 ms the
+    option's level still moves between -4.7 and -8.6 % (docs/isph.md, "The stabilisation over the pore
+    lattice's support"): the grid's steps agree, the plug is still too coarse for a steady level at every
+    step. Bounds: the spread 3 points (the acceptance's, above the worst measured 2.6; the default fails
+    it), the level 10 % (the coarse plug's own error, -9.2 % at worst)."""
+    devs = {}
+    for dt in (0.0005, 0.001):
+        t, h, _, _, dx = _permeameter_run(tmp_path / f"pm_{dt}.h5", dt, "dx=0.01", "isph.ground_density_support=pore")
+        assert dx == 0.01
+        dev, half, _ = _level_deviation(t, h)
+        assert half.sum() > 20
+        devs[dt] = dev[half]
+        assert np.max(np.abs(dev[half])) < 0.10, (dt, dev[half].min(), dev[half].max())
+    n = min(len(d) for d in devs.values())
+    spread = float(np.max(np.abs(devs[0.0005][:n] - devs[0.001][:n])))
+    print(f"pore support, 10 mm: spread over dt 0.5 / 1 ms {spread:.4f}")
+    assert spread < 0.03, spread
+
+
+def test_pore_support_reads_the_pore_lattice(ti_cpu):
+    """Eq 31's density over the pore lattice's support (isph.ground_density_support: pore, _k_pore_density)
+    in ground of porosity 0.25 holding water on its pore lattice (spacing 2 dx: 10 x 10 particles in a
+    0.2 m block at dx 1 cm, exactly its pores): the support r_e eps^(-1/2) = 2 r_e is the free-water
+    support scaled with the lattice, so away from the walls and the block's faces every particle reads
+    eps rho_w (1e-9 relative). Every particle's reading is the sum over the water and wall particles
+    within 2 r_e, the grid's cells searched two deep (against a sum over all particles, 1e-12)."""
+    from taichi_sph.config import load_config
+    from taichi_sph.isph.solver import ISPHSolver
+    from taichi_sph.scene import build_scene
+    from taichi_sph.sph import kernels
+
+    cfg = load_config(ROOT / "configs" / "permeameter.yaml", overrides=[
+        "water=[{min: [0.0, 0.2], max: [0.2, 0.4], porosity: 0.25}]", "tank.size=[0.2, 0.6]",
+        "soil.regions=[{min: [0.0, 0.2], max: [0.2, 0.4], eps0: 0.25, d50: 0.01}]",
+        "isph.ground_density_support=pore"])
+    scene = build_scene(cfg)
+    assert np.allclose(scene.packing, 1.0)
+    solver = ISPHSolver(cfg, scene)
+    solver.initial_diagnostics()
+    n = solver.n
+    x, kind, eps = solver.x.to_numpy()[:n], solver.kind.to_numpy()[:n], solver.eps.to_numpy()[:n]
+    rho = solver.rho_pore.to_numpy()[:n]
+    pore = (kind == WATER) & (eps < 1.0)
+    assert pore.sum() == 100
+    re = kernels.SUPPORT_FACTOR * cfg.dx
+    inner = pore & np.all((x > 2 * re) & (x < [0.2 - 2 * re, 0.4 - 2 * re]), axis=1) & (x[:, 1] > 0.2 + 2 * re)
+    assert inner.sum() >= 4
+    assert np.allclose(rho[inner], 0.25 * 1000.0, rtol=1e-9, atol=0.0), rho[inner]
+    wet = solver.wet.to_numpy()[:n] == 1  # a dry wall (above the water) counts as air in every sum
+    present = ((kind == WATER) | ((kind == WALL) & wet)) & (solver.active.to_numpy()[:n] != 0)
+    for i in np.flatnonzero(pore):
+        hp = min(eps[i] ** -0.5, 2.0) * 0.5 * re
+        r = np.linalg.norm(x[present] - x[i], axis=1)
+        share = np.where(kind[present] == WATER, eps[i] / eps[present], eps[i])
+        wsum = np.sum(share * kernels.w_np(r, hp, 2) * (r < 2 * hp))
+        assert rho[i] == pytest.approx(solver.mass * wsum / solver.kernel_sum, rel=1e-12)
 
 
 @pytest.mark.xdist_group("permeameter_runs")  # one worker computes the shared runs once

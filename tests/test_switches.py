@@ -31,6 +31,7 @@ ISPH_FLAGS = {
     "ground_cone": lambda s: s.ground_cone,
     "ground_tension": lambda s: s.ground_tension,
     "tension_memory": lambda s: s.tension_memory,
+    "pore_density": lambda s: s.pore_density,
     "ground_drained": lambda s: s.drained_candidate,
     "air_entry": lambda s: s.suction_floor > 0.0,
     "ground_correction": lambda s: s.ground_correction,

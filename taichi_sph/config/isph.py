@@ -121,6 +121,16 @@ class ISPH(Strict):
     #: that step (dx 2 cm, dt 1 ms). false = air enters only from a free neighbour, the rule before
     #: (docs/isph.md, "Drained pore water a candidate of the cone")
     ground_tension_memory: bool = True
+    #: the support over which eq 31's stabilisation reads the density of pore water (eps < 1):
+    #: "particle", r_e, the seed's (and every other sum's); "pore", r_e eps^(-1/dim) (at most 2 r_e), the
+    #: same support in units of the pore lattice's spacing, so that pore water is read over as many
+    #: neighbours as free water. Over r_e a pore particle has 6-7 neighbours (2D, eps 0.4) and the
+    #: reading depends on their arrangement: the permeameter's 10 mm plug held 0.97 or 1.03 of its pores
+    #: at the same reading and its level split into branches 4.5 points apart over dt, and the coarse
+    #: free fall's layer read 5 % above its fill (docs/isph.md, "The stabilisation over the pore
+    #: lattice's support"). Its rest state at t = 0 is taken over the packing of the block the water
+    #: was placed in (scene.packing)
+    ground_density_support: Literal["particle", "pore"] = "particle"
     #: with the cone test: pore water (eps < 1) whose <rho> is below ground_tension_fill of its rest value
     #: is a candidate of that test, whatever eq 34's count says. A front that enters dry ground as a sheet
     #: at the free water's spacing passes the count, which is scaled to the pore lattice, and as an

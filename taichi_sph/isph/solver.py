@@ -146,6 +146,8 @@ class ISPHSolver(SolverCommon):
         self.tension_memory = sw.tension_memory
         # drained pore water is a candidate of the cone test (_k_surface_cone)
         self.drained_candidate = sw.ground_drained
+        # eq 31's stabilisation reads pore water over the pore lattice's support (_k_pore_density)
+        self.pore_density = sw.pore_density
         # kernel-gradient correction in the ground (L_i = M_i^-1 where eps_i < 1), else plain eq 12 there
         self.ground_correction = sw.ground_correction
         #: candidate of the cone test (in or next to the ground): eq 34's count or the plain count marks it,
@@ -187,6 +189,13 @@ class ISPHSolver(SolverCommon):
         #: rest fill of water that starts in or next to ground: its <rho> / rho_bar at t = 0
         self.rest_fill = ti.field(float, n)
         self.rest_fill.fill(1.0)
+        #: with isph.ground_density_support pore: pore water's <rho> over the pore lattice's support, its
+        #: rest fill (over the packing of the block it was placed in, `packing`, read at t = 0)
+        self.rho_pore = ti.field(float, n)
+        self.rest_fill_pore = ti.field(float, n)
+        self.rest_fill_pore.fill(1.0)
+        self.packing = ti.field(float, n)
+        self._scene_packing = np.ones(n) if scene.packing is None else np.asarray(scene.packing, float)
         #: the free-surface flag at the end of the last step (_k_surface_cone reads it: air's path)
         self.air_last = ti.field(ti.i32, n)
         self.nu_t = ti.field(float, n)
@@ -238,6 +247,8 @@ class ISPHSolver(SolverCommon):
         self.particle_fields = [self.x, self.v, self.normal, self.p, self.eps, self.kind, self.ids, self.active]
         if self.porous:
             self.particle_fields += [self.rest_fill, self.air_last]
+            if self.pore_density:
+                self.particle_fields.append(self.rest_fill_pore)
 
         self.np_fp = np.float64 if is_f64() else np.float32
         self.x.from_numpy(scene.position.astype(self.np_fp))
@@ -751,6 +762,35 @@ class ISPHSolver(SolverCommon):
         for i in range(self.n):
             self.air_last[i] = self.free[i]
 
+    @ti.kernel
+    def _k_pore_density(self):
+        """<rho_i> of pore water (eps_i < 1) over the pore lattice's support, r_e eps_i^(-1/dim) (at most
+        2 r_e; isph.ground_density_support pore), for eq 31's stabilisation. On the pore lattice that
+        support holds as many neighbours as r_e holds in free water, and the sum reads eps_i rho_w (the
+        kernel widened by the lattice's own scale). Water neighbours count their bulk volume in units of
+        i's (eps_i / eps_j), wall particles eps_i, as in _k_density; the cells within the support are
+        searched (the grid's cells are r_e wide)."""
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.n):
+            if self.solve_mask[i] == 1 and self.eps[i] < 1.0:
+                xi = self.x[i]
+                hp = ti.min(ti.pow(self.eps[i], -1.0 / self.dim), 2.0) * self.h
+                reach2 = 4.0 * hp * hp
+                wsum = kernels.w(0.0, hp, self.dim)
+                for off in ti.grouped(ti.ndrange(*([(-2, 3)] * self.dim))):
+                    if self.grid.cell_gap2(xi, off) < reach2:
+                        a, b = self.grid.cell_range(xi, off)
+                        for j in range(a, b):
+                            if j != i and self.active[j] != 0 and (self.kind[j] == WATER or self.kind[j] == WALL) \
+                                    and self._present(j):
+                                r = operators.rel(xi, self.x[j], self.period).norm()
+                                if r < 2.0 * hp:
+                                    share = self.eps[i]
+                                    if self.kind[j] == WATER:
+                                        share = self.eps[i] / self.eps[j]
+                                    wsum += share * kernels.w(r, hp, self.dim)
+                self.rho_pore[i] = self.mass * wsum / self.kernel_sum
+
     @ti.func
     def _rest_density(self, i):
         """<rho_i> of water particle i at rest: eps_i rho_w, times its rest fill (_k_rest_fill) with porous
@@ -792,6 +832,12 @@ class ISPHSolver(SolverCommon):
                 if near:
                     ratio = self.rho_n[i] / (self.eps[i] * self.rho_w)
                     self.rest_fill[i] = ti.min(ti.max(ratio, 0.8), 1.25)
+                    if ti.static(self.pore_density):
+                        if self.eps[i] < 1.0:
+                            # over the block's packing: its rounding is water above or below the pores,
+                            # which the stabilisation is to relax (42 particles for 40 in the 10 mm plug)
+                            fill = self.rho_pore[i] / (self.eps[i] * self.rho_w * self.packing[i])
+                            self.rest_fill_pore[i] = ti.min(ti.max(fill, 0.8), 1.25)
 
     @ti.kernel
     def _k_eddy_viscosity(self):
@@ -952,6 +998,10 @@ class ISPHSolver(SolverCommon):
                                     self._ppe_add(A, ri, self.row[j], -K)
                     div /= rb_i
                     stab = terms.density_stabilisation(self.alpha, eps_i, self._rest_density(i), self.rho_n[i], dt)
+                    if ti.static(self.pore_density):
+                        if eps_i < 1.0:
+                            stab = terms.density_stabilisation(self.alpha, eps_i, eps_i * self.rho_w
+                                                               * self.rest_fill_pore[i], self.rho_pore[i], dt)
                     if ti.static(self.porous):
                         # the density error is relaxed through the same drag as the flow: without the
                         # 1 / D, fine sand (D ~ 300 at D50 = 0.1 mm) turns a 1 % density error into
@@ -1409,6 +1459,8 @@ class ISPHSolver(SolverCommon):
         t0 = self._tick("porosity", t0)
         self._k_wet()
         self._k_density()
+        if self.pore_density:
+            self._k_pore_density()
         if self.ground_cone:
             self._k_surface_cone()
         if self.porous:
@@ -1483,6 +1535,10 @@ class ISPHSolver(SolverCommon):
             self.air_last.fill(1)
             self._k_surface_cone()
             self._k_remember_air()
+        if self.pore_density:
+            self._k_pore_density()
+            # each particle's block packing, in the order the neighbour search left the particles
+            self.packing.from_numpy(self._scene_packing[self.ids.to_numpy()].astype(self.np_fp))
         if self.porous:
             self._k_rest_fill()
         d = self._k_diagnostics().to_numpy()
@@ -1523,7 +1579,7 @@ class ISPHSolver(SolverCommon):
     #: fields that carry over from one step to the next (all else is recomputed by each step); the
     #: pressure is the PPE's warm start. Per-particle state added later belongs in this tuple.
     state_fields = ("x", "v", "normal", "p", "eps", "kind", "ids", "active", "rho_n", "d50", "rest_fill",
-                    "wall_body", "wall_origin", "air_last")
+                    "rest_fill_pore", "wall_body", "wall_origin", "air_last")
     state_scalars = ("step_count", "time", "removed_total")
 
     def state(self) -> dict:
@@ -1539,6 +1595,9 @@ class ISPHSolver(SolverCommon):
         if "air_last" not in state:
             # saved before the cone test looked for air: every surface is open to it, as at t = 0
             state = {**state, "air_last": np.ones(self.n, np.int32)}
+        if "rest_fill_pore" not in state:
+            # saved before the pore lattice's support: its rest state is the pore lattice's
+            state = {**state, "rest_fill_pore": np.ones(self.n)}
         restore(self, state, self.state_fields, self.state_scalars)
 
 

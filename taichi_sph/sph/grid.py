@@ -388,6 +388,24 @@ class NeighbourGrid:
             b = self.cell_start[lin + 1]
         return a, b
 
+    @ti.func
+    def cell_gap2(self, point, off):
+        """Squared distance from `point` to the nearest point of the cell `off` (integer offsets per axis)
+        away from the cell that holds it: a search reaching farther than one cell skips the cells that lie
+        wholly beyond its radius."""
+        gap2 = 0.0
+        for d in ti.static(range(self.dim)):
+            edge = ti.static(self._edge[d])
+            c = ti.floor((point[d] - ti.static(self._lo[d])) / edge)
+            lo_d = ti.static(self._lo[d]) + (c + off[d]) * edge
+            g = 0.0
+            if off[d] > 0:
+                g = lo_d - point[d]
+            elif off[d] < 0:
+                g = point[d] - (lo_d + edge)
+            gap2 += g * g
+        return gap2
+
     @ti.kernel
     def _group_rows(self, group: ti.template(), n: ti.i32):
         ti.loop_config(serialize=self.serial_loops)
