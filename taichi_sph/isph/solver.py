@@ -832,7 +832,7 @@ class ISPHSolver(SolverCommon):
                 if near:
                     ratio = self.rho_n[i] / (self.eps[i] * self.rho_w)
                     self.rest_fill[i] = ti.min(ti.max(ratio, 0.8), 1.25)
-                    if ti.static(self.pore_density):
+                    if ti.static(self.pore_density):  # noqa: SIM102 (compiled only with the option)
                         if self.eps[i] < 1.0:
                             # over the block's packing: its rounding is water above or below the pores,
                             # which the stabilisation is to relax (42 particles for 40 in the 10 mm plug)
@@ -998,7 +998,7 @@ class ISPHSolver(SolverCommon):
                                     self._ppe_add(A, ri, self.row[j], -K)
                     div /= rb_i
                     stab = terms.density_stabilisation(self.alpha, eps_i, self._rest_density(i), self.rho_n[i], dt)
-                    if ti.static(self.pore_density):
+                    if ti.static(self.pore_density):  # noqa: SIM102 (compiled only with the option)
                         if eps_i < 1.0:
                             stab = terms.density_stabilisation(self.alpha, eps_i, eps_i * self.rho_w
                                                                * self.rest_fill_pore[i], self.rho_pore[i], dt)
