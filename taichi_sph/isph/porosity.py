@@ -137,6 +137,7 @@ def share_against_front(times, share, h0, depth, eps, d50):
     dev = [share(k) - eps * z(t) / h0 for k, t in enumerate(times) if t <= arrival]
     return (dev[int(np.argmax(np.abs(dev)))] if dev else float("nan")), arrival, len(dev)
 
+
 def bulk_front_arrival(times, share, eps, depth, h0):
     """The time a run's water body reaches the bottom of ground of porosity eps and thickness `depth`, as
     penetration_front defines it: when the share of the water that has entered the ground, share[k] at

@@ -1040,15 +1040,14 @@ class ISPHSolver(SolverCommon):
         hanging under the free fall's layer in a corner, its cones blocked by the walls it wets, lost every
         free-surface row in one step and was pulled at -182 kPa). Without capillarity water cannot be
         pulled: air enters where the projection would hold a thinning sheet together, but only from the
-        air, through the surface: water with no
-        surface in its support (the bottom of a column standing on a saturated plug, short of neighbours
-        only because the pore water below it is sparse) is closed to the air and keeps its tension, which
-        there is the transient of discrete particles entering the pores (docs/isph.md, "Surface test in the
-        ground"). Air advances one support per pass. Returns how many were freed (the PPE is then solved
-        again). Inside the ground (eps_i < 1) only pore water that has drained, <rho_i> below
-        isph.ground_tension_fill of its rest value eps_i rho_w rest_fill_i, takes the rule (docs/isph.md,
-        "Air into drained pores"): saturated pore water near a plug's exit face sits near zero pressure,
-        and freeing its noise put Dirichlet rows into the plug."""
+        air, through the surface: water with no surface in its support (the bottom of a column standing on
+        a saturated plug, short of neighbours only because the pore water below it is sparse) is closed to
+        the air and keeps its tension, which there is the transient of discrete particles entering the
+        pores (docs/isph.md, "Surface test in the ground"). Air advances one support per pass. Returns how
+        many were freed (the PPE is then solved again). Inside the ground (eps_i < 1) only pore water that
+        has drained, <rho_i> below isph.ground_tension_fill of its rest value eps_i rho_w rest_fill_i, takes
+        the rule (docs/isph.md, "Air into drained pores"): saturated pore water near a plug's exit face
+        sits near zero pressure, and freeing its noise put Dirichlet rows into the plug."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             self.air_entry_now[i] = 0
