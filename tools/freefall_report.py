@@ -80,7 +80,8 @@ def analyse(path):
         return {
             "run": str(path), "dx": rf.dx, "dt": float(cfg["dt"]), "eps0": region["eps0"],
             "alpha": cfg.get("isph", {}).get("alpha", 0.01),
-            "arrival_s": arrival, "body_arrival_s": body, "fraction_in_layer": frac_at, "drift_at_arrival": drift_arrival,
+            "arrival_s": arrival, "body_arrival_s": body, "fraction_in_layer": frac_at,
+            "drift_at_arrival": drift_arrival,
             "drift_min": float(vol.min()), "t_min": float(t[np.argmin(vol)]),
             "drift_max": float(vol.max()), "t_max": float(t[np.argmax(vol)]),
             "drift_end": float(vol[settled].mean()),
