@@ -209,7 +209,10 @@ PERMEAMETER_SPREAD_NOTES = {
           "0.25 / 0.5 ms). The spread of 1.9 points read here before drained pore water became a candidate of "
           "the cone test held only at the exact spacing: with dx moved by a part in 10^7 that code's 0.5 ms "
           "run reads -4.2..-4.5 % instead of -6.3 % (docs/isph.md, \"The 10 mm plug's two branches\" and "
-          "\"Drained pore water a candidate of the cone\")",
+          "\"Drained pore water a candidate of the cone\"). With eq 31 read over the pore lattice's support "
+          "(isph.ground_density_support: pore, an option) the grid reads -7.1 / -6.7 / -7.4 % at 0.25 / 0.5 / 1 "
+          "ms, 0.68 points apart (0.84 / 0.35 at 5 / 2.5 mm), but 3.9 points over 0.25-1.1 ms (docs/isph.md, "
+          "\"The stabilisation over the pore lattice's support\")",
 }
 
 
