@@ -490,17 +490,11 @@ class ISPHSolver(SolverCommon):
                     j, rij, r = self._pair(i, k, xi)
                     if not self._present(j):
                         continue
-                    # a wall particle stands for water of mass eps_i m at the wall lattice: volume dx^d
-                    share = self.eps[i]
+                    share = self._density_share(i, j)
                     count = wall_count
                     vj = self._volume(j)
                     if self.kind[j] == WATER:
                         n_water += 1
-                        # bulk volume m / (eps_j rho_w) in units of i's own: a water particle in ground
-                        # fills 1 / eps_j lattice cells, so the count and the density near a soil surface
-                        # measure how full the support is, not how many particles it holds (identical
-                        # to counting particles where eps is uniform)
-                        share = self.eps[i] / self.eps[j]
                         count = share
                     nb += count
                     wsum += share * kernels.w(r, self.h, self.dim)
@@ -767,9 +761,8 @@ class ISPHSolver(SolverCommon):
         """<rho_i> of pore water (eps_i < 1) over the pore lattice's support, r_e eps_i^(-1/dim) (at most
         2 r_e; isph.ground_density_support pore), for eq 31's stabilisation. On the pore lattice that
         support holds as many neighbours as r_e holds in free water, and the sum reads eps_i rho_w (the
-        kernel widened by the lattice's own scale). Water neighbours count their bulk volume in units of
-        i's (eps_i / eps_j), wall particles eps_i, as in _k_density; the cells within the support are
-        searched (the grid's cells are r_e wide)."""
+        kernel widened by the lattice's own scale). Neighbours count as in _k_density (_density_share);
+        the cells within the support are searched (the grid's cells are r_e wide)."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1 and self.eps[i] < 1.0:
@@ -785,11 +778,20 @@ class ISPHSolver(SolverCommon):
                                     and self._present(j):
                                 r = operators.rel(xi, self.x[j], self.period).norm()
                                 if r < 2.0 * hp:
-                                    share = self.eps[i]
-                                    if self.kind[j] == WATER:
-                                        share = self.eps[i] / self.eps[j]
-                                    wsum += share * kernels.w(r, hp, self.dim)
+                                    wsum += self._density_share(i, j) * kernels.w(r, hp, self.dim)
                 self.rho_pore[i] = self.mass * wsum / self.kernel_sum
+
+    @ti.func
+    def _density_share(self, i, j):
+        """What neighbour j adds to particle i's number density, in units of i's own particle: a water
+        particle its bulk volume m / (eps_j rho_w) over i's, eps_i / eps_j (a water particle in ground fills
+        1 / eps_j lattice cells, so the count and the density near a soil surface measure how full the
+        support is, not how many particles it holds; identical to counting particles where eps is
+        uniform); a wall particle water of mass eps_i m at the wall lattice (volume dx^d), eps_i."""
+        share = self.eps[i]
+        if self.kind[j] == WATER:
+            share = self.eps[i] / self.eps[j]
+        return share
 
     @ti.func
     def _rest_density(self, i):
