@@ -570,6 +570,26 @@ def test_water_body_arrival_is_the_front_arrival():
     assert np.isnan(bulk_front_arrival([0.0, 0.1], [0.0, 0.1], 0.3, 0.2, 0.2))
 
 
+def test_slab_count_of_a_lattice_does_not_move_with_its_offset():
+    """porosity.slab_count, the coarse free fall's count of the water in the layer's core (each particle a
+    slab of the pore lattice's row spacing): rows at spacing a, shifted through a whole spacing across a
+    core 3.5 rows tall (the free fall's at dx 2 cm), count (hi - lo) / a rows at every offset, as the
+    volume they fill; a count of the centres moves between 3 and 4 rows. Bound 1e-12 (rounding); a row
+    lying wholly inside counts 1, one wholly outside 0."""
+    from taichi_sph.isph.porosity import slab_count
+
+    a, lo = 0.03, 0.248
+    hi = lo + 3.5 * a
+    centres = set()
+    for offset in np.linspace(0.0, a, 37):
+        z = 0.2 + offset + a * np.arange(-2, 12)
+        assert slab_count(z, lo, hi, a) == pytest.approx(3.5, abs=1e-12), offset
+        centres.add(int(np.sum((z > lo) & (z < hi))))
+    assert centres == {3, 4}
+    assert slab_count([lo + 0.5 * a], lo, hi, a) == pytest.approx(1.0, abs=1e-12)
+    assert slab_count([lo - 0.5 * a, hi + 0.5 * a], lo, hi, a) == 0.0
+
+
 def _entered_against_front(path, eps0):
     """Largest deviation, over the frames up to the 1D front's arrival, of the share of the water below the
     layer's top (z < 0.40 m) from eps0 z(t) / h0, the water the 1D front of porosity.penetration_front

@@ -8,7 +8,11 @@ particle reaches the bottom of the layer (interpolated between frames; the seed 
 layer's top first reaches eps0 times the layer's depth over the block's height
 (porosity.bulk_front_arrival: the 1D front's arrival, where the seed reads about eps0 of the water in
 the layer); the fraction of the water inside the layer when the lowest particle arrives (seed: about
-eps0); the water volume measure (sum of m eps / <rho>, docs/output.md) against t = 0 at
+eps0); the water in the layer's core (farther than r_e = 2.4 dx from its top and bottom) per pore
+volume over 0.6-1.2 s, while the water passes it, counted without a kernel: the particles' centres,
+and each particle as a slab of the pore lattice's row spacing dx / eps0^(1/dim) (porosity.slab_count:
+at dx 2 cm the core holds about 3.5 rows and a count of centres moves by a row as rows cross its
+faces); the water volume measure (sum of m eps / <rho>, docs/output.md) against t = 0 at
 arrival, its lowest and highest value over the run and its mean over the last 0.25 s (the last
 sample alone scatters with the sloshing pool); the water still inside the layer at the end; the
 bottom pressure at the end against hydrostatic, and the pool's vertical pressure gradient against
@@ -30,7 +34,8 @@ import numpy as np
 import yaml
 
 from taichi_sph.io.hdf5 import RunFile
-from taichi_sph.isph.porosity import bulk_front_arrival
+from taichi_sph.isph.porosity import bulk_front_arrival, slab_count
+from taichi_sph.sph.kernels import SUPPORT_FACTOR
 from validate import FREEFALL_ARRIVAL  # the seed's arrival times (tools/ is this script's folder)
 
 
@@ -40,16 +45,30 @@ def analyse(path):
         region = cfg["soil"]["regions"][0]
         z_lo, z_hi = region["min"][-1], region["max"][-1]
         water = rf.kind == 0
-        times, zmin, frac, entered = rf.times, [], [], []
+        eps0 = float(region["eps0"])
+        # the layer's core and the particles its pores hold (each particle's water volume dx^dim)
+        core_lo, core_hi = z_lo + SUPPORT_FACTOR * rf.dx, z_hi - SUPPORT_FACTOR * rf.dx
+        plan = float(np.prod([b - a for a, b in zip(region["min"][:-1], region["max"][:-1])]))
+        pores = eps0 * plan * (core_hi - core_lo) / rf.dx**rf.dim
+        row = rf.dx / eps0 ** (1.0 / rf.dim)
+        times, zmin, frac, entered, centres, slabs = rf.times, [], [], [], [], []
         for i in range(rf.n_frames):
             f = rf.frame(i)
             z = f["position"][water & f["active"]][:, -1]
             zmin.append(z.min())
             frac.append(np.mean((z >= z_lo) & (z <= z_hi)))
             entered.append(np.mean(z < z_hi))
+            centres.append(np.sum((z > core_lo) & (z < core_hi)) / pores)
+            slabs.append(slab_count(z, core_lo, core_hi, row) / pores)
         zmin, frac = np.array(zmin), np.array(frac)
+        passing = (times >= 0.6 - 1e-9) & (times <= 1.2 + 1e-9)
+        core = None
+        if passing.sum() > 1:
+            c, sl = np.array(centres)[passing], np.array(slabs)[passing]
+            core = (float(c.mean()), float(c.min()), float(c.max()), float(sl.mean()), float(sl.min()),
+                    float(sl.max()))
         block = cfg["water"][0]
-        body = bulk_front_arrival(times, entered, float(region["eps0"]), z_hi - z_lo,
+        body = bulk_front_arrival(times, entered, eps0, z_hi - z_lo,
                                   float(block["max"][-1]) - float(block["min"][-1]))
         k = int(np.argmax(zmin < z_lo)) if np.any(zmin < z_lo) else None
         arrival = frac_at = None
@@ -81,7 +100,7 @@ def analyse(path):
             "run": str(path), "dx": rf.dx, "dt": float(cfg["dt"]), "eps0": region["eps0"],
             "alpha": cfg.get("isph", {}).get("alpha", 0.01),
             "arrival_s": arrival, "body_arrival_s": body, "fraction_in_layer": frac_at,
-            "drift_at_arrival": drift_arrival,
+            "drift_at_arrival": drift_arrival, "core_fill": core,
             "drift_min": float(vol.min()), "t_min": float(t[np.argmin(vol)]),
             "drift_max": float(vol.max()), "t_max": float(t[np.argmax(vol)]),
             "drift_end": float(vol[settled].mean()),
@@ -111,9 +130,11 @@ def row(r):
         f"{r['bottom_pressure_Pa']:.0f} / {r['hydrostatic_Pa']:.0f} Pa, "
         f"{r['bottom_pressure_Pa'] / r['hydrostatic_Pa'] - 1:+.1%}")
     finished = "yes" if r["finished"] else f"stopped at {r['end_s']:.2f} s"
+    c = r["core_fill"]
+    core = "-" if c is None else f"{c[0]:.3f} ({c[1]:.3f}-{c[2]:.3f}) / {c[3]:.3f} ({c[4]:.3f}-{c[5]:.3f})"
     return (f"| {r['dx']:g} | {r['dt'] * 1e3:g} ms | {r['eps0']:g} | {r['alpha']:g} | {r['options']} | "
             f"{fmt(r['arrival_s'], '.3f')} ({fmt(seed, 'g')}) | {fmt(r['body_arrival_s'], '.3f')} | "
-            f"{fmt(r['fraction_in_layer'], '.3f')} | "
+            f"{fmt(r['fraction_in_layer'], '.3f')} | {core} | "
             f"{fmt(r['drift_at_arrival'], '+.1%')} | {r['drift_min']:+.1%} ({r['t_min']:.2f} s) | "
             f"{r['drift_max']:+.1%} ({r['t_max']:.2f} s) | {fmt(r['drift_end'], '+.1%')} | "
             f"{fmt(r['in_layer_end'], '.1%')} | {pressure} | {fmt(r['pool_gradient'], '.3f')} | "
@@ -122,7 +143,8 @@ def row(r):
 
 HEADER = ("| dx (m) | dt | eps0 | alpha | shifting / collisions / advection | arrival (s) (seed) | "
           "water body's arrival (s) | "
-          "water in layer at arrival | volume at arrival | "
+          "water in layer at arrival | layer core per pore volume 0.6-1.2 s: centres / slabs, mean (frames) | "
+          "volume at arrival | "
           "volume lowest (t) | volume highest (t) | volume at end | in layer at end | "
           "bottom pressure vs hydrostatic | pool dP/dz / (rho_w g) | largest speed m/s (t) | finished | "
           "wall time (s) |")

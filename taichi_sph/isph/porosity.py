@@ -159,6 +159,17 @@ def bulk_front_arrival(times, share, eps, depth, h0):
     return float(times[k - 1] + part * (times[k] - times[k - 1]))
 
 
+def slab_count(z, lo, hi, thickness):
+    """How many particles at heights z lie between lo and hi, each counted as a slab of its own
+    `thickness` centred on it: the share of each slab inside [lo, hi], summed. A count of the centres
+    moves by a whole row as a row crosses lo or hi (a coarse layer's core holds a few rows of the pore
+    water); counted as slabs of the row spacing, a lattice of rows gives the same count whatever its
+    offset, (hi - lo) / thickness rows. No kernel: the water the slabs hold, not what a kernel reads."""
+    z = np.asarray(z, dtype=float)
+    inside = np.minimum(z + 0.5 * thickness, hi) - np.maximum(z - 0.5 * thickness, lo)
+    return float(np.sum(np.clip(inside, 0.0, thickness)) / thickness)
+
+
 def column_level(z, base, dx):
     """Height above `base` of the free surface of a water column whose particles sit at heights z: the
     mean height of its top row (within dx / 2 of the highest particle) plus dx / 2, the top of those
