@@ -67,14 +67,15 @@ def install() -> bool:
 def _memo_pos_info(method):
     """`method` (a get_pos_info) memoized by the node's place: the string is a function of the file, the
     function's name and first line, the node's lines and columns, its kind and (a block) its body's first
-    line, all fixed by where the node stands in a file that does not change."""
+    line, all fixed by where the node stands in a file that does not change (its first line's text is in
+    the key too, for sources that share a file name, as `python -c` code does)."""
     memo = {}
 
     def get_pos_info(self, node):
         body = getattr(node, "body", None)
         key = (self.file, self.lineno_offset, self.indent, self.func.func.__name__, type(node).__name__,
                node.lineno, node.end_lineno, node.col_offset, node.end_col_offset,
-               body[0].lineno if isinstance(body, list) and body else None)
+               body[0].lineno if isinstance(body, list) and body else None, self.src[node.lineno - 1])
         text = memo.get(key)
         if text is None:
             text = memo[key] = method(self, node)
