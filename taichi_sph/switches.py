@@ -57,7 +57,10 @@ class Switches:
                                                    "surface at the end of the last step is freed again "
                                                    "(isph.ground_tension_memory)")
     pore_density: bool | None = _switch((ISPH,), "porous ground: eq 31's stabilisation reads pore water over the "
-                                                 "pore lattice's support (isph.ground_density_support: pore)")
+                                                 "pore lattice's support (isph.ground_density_support: pore or "
+                                                 "interior)")
+    pore_interior: bool | None = _switch((ISPH,), "with the pore support: only where it lies in uniform ground, r_e "
+                                                  "elsewhere (isph.ground_density_support: interior)")
     ground_drained: bool | None = _switch((ISPH,), "with the cone: drained pore water is a candidate of the cone "
                                                    "test (isph.ground_drained_candidate)")
     air_entry: bool | None = _switch((ISPH,), "pore water's suction clamped at the ground's air-entry value "
@@ -113,7 +116,8 @@ class Switches:
                        and i.ground_surface_tension,
                        tension_memory=bool(scene.markers) and i.ground_surface_cone > 0.0
                        and i.ground_surface_tension and i.ground_tension_memory,
-                       pore_density=bool(scene.markers) and i.ground_density_support == "pore",
+                       pore_density=bool(scene.markers) and i.ground_density_support in ("pore", "interior"),
+                       pore_interior=bool(scene.markers) and i.ground_density_support == "interior",
                        ground_drained=bool(scene.markers) and i.ground_surface_cone > 0.0
                        and i.ground_drained_candidate,
                        air_entry=bool(scene.markers) and i.air_entry_suction is not None,

@@ -359,22 +359,29 @@ def test_coarse_permeameter_level_does_not_depend_on_the_time_step(tmp_path):
     assert spread < 0.03, spread
 
 
-def test_pore_support_reads_the_pore_lattice(ti_cpu):
+@pytest.mark.parametrize("support", ["pore", "interior"])
+def test_pore_support_reads_the_pore_lattice(ti_cpu, support):
     """Eq 31's density over the pore lattice's support (isph.ground_density_support: pore, _k_pore_density)
     in ground of porosity 0.25 holding water on its pore lattice (spacing 2 dx: 10 x 10 particles in a
     0.2 m block at dx 1 cm, exactly its pores): the support r_e eps^(-1/2) = 2 r_e is the free-water
     support scaled with the lattice, so away from the walls and the block's faces every particle reads
     eps rho_w (1e-9 relative). Every particle's reading is the sum over the water and wall particles
-    within 2 r_e, the grid's cells searched two deep (against a sum over all particles, 1e-12)."""
+    within 2 r_e, the grid's cells searched two deep (against a sum over all particles, 1e-12).
+    With `interior` (and free water over the ground) eq 31 takes that reading only where every water
+    particle within the support has the particle's own porosity (against the same test over all
+    particles): the top rows, whose support reaches the free water or the water on eq 32's ramp, take
+    r_e; with `pore` every pore particle takes it."""
     from taichi_sph.config import load_config
     from taichi_sph.isph.solver import ISPHSolver
     from taichi_sph.scene import build_scene
     from taichi_sph.sph import kernels
 
+    # with interior, free water over the ground (0.40-0.46 m) too, whose support reaches into the ground
+    free = ", {min: [0.0, 0.4], max: [0.2, 0.46]}" if support == "interior" else ""
     cfg = load_config(ROOT / "configs" / "permeameter.yaml", overrides=[
-        "water=[{min: [0.0, 0.2], max: [0.2, 0.4], porosity: 0.25}]", "tank.size=[0.2, 0.6]",
+        f"water=[{{min: [0.0, 0.2], max: [0.2, 0.4], porosity: 0.25}}{free}]", "tank.size=[0.2, 0.6]",
         "soil.regions=[{min: [0.0, 0.2], max: [0.2, 0.4], eps0: 0.25, d50: 0.01}]",
-        "isph.ground_density_support=pore"])
+        f"isph.ground_density_support={support}"])
     scene = build_scene(cfg)
     assert np.allclose(scene.packing, 1.0)
     solver = ISPHSolver(cfg, scene)
@@ -396,6 +403,18 @@ def test_pore_support_reads_the_pore_lattice(ti_cpu):
         share = np.where(kind[present] == WATER, eps[i] / eps[present], eps[i])
         wsum = np.sum(share * kernels.w_np(r, hp, 2) * (r < 2 * hp))
         assert rho[i] == pytest.approx(solver.mass * wsum / solver.kernel_sum, rel=1e-12)
+    read = solver.pore_read.to_numpy()[:n]
+    if support == "pore":
+        assert np.all(read[pore] == 1)
+        return
+    water = (kind == WATER) & (solver.active.to_numpy()[:n] != 0)
+    for i in np.flatnonzero(pore):
+        hp = min(eps[i] ** -0.5, 2.0) * 0.5 * re
+        near = water & (np.linalg.norm(x - x[i], axis=1) < 2 * hp)
+        assert read[i] == int(np.all(np.abs(eps[near] - eps[i]) <= 1e-6)), (i, x[i], eps[near])
+    assert np.all(read[inner] == 1)
+    print(f"read over the pore support: {int(read[pore].sum())} of {int(pore.sum())}")
+    assert 0 < read[pore].sum() < pore.sum()
 
 
 @pytest.mark.xdist_group("permeameter_runs")  # one worker computes the shared runs once

@@ -32,6 +32,7 @@ ISPH_FLAGS = {
     "ground_tension": lambda s: s.ground_tension,
     "tension_memory": lambda s: s.tension_memory,
     "pore_density": lambda s: s.pore_density,
+    "pore_interior": lambda s: s.pore_interior,
     "ground_drained": lambda s: s.drained_candidate,
     "air_entry": lambda s: s.suction_floor > 0.0,
     "ground_correction": lambda s: s.ground_correction,

@@ -129,8 +129,12 @@ class ISPH(Strict):
     #: at the same reading and its level split into branches 4.5 points apart over dt, and the coarse
     #: free fall's layer read 5 % above its fill (docs/isph.md, "The stabilisation over the pore
     #: lattice's support"). Its rest state at t = 0 is taken over the packing of the block the water
-    #: was placed in (scene.packing)
-    ground_density_support: Literal["particle", "pore"] = "particle"
+    #: was placed in (scene.packing). "interior": the pore support where it lies in uniform ground (every
+    #: water particle within it of the particle's own porosity), r_e elsewhere: water crossing eq 32's
+    #: ramp into the ground, pressed at the free water's spacing, is read over r_e, where the pore
+    #: support spread its excess over the pores behind it and the plug held 1.5-2 % more than its pores
+    #: (docs/isph.md, "The pore support in uniform ground only")
+    ground_density_support: Literal["particle", "pore", "interior"] = "particle"
     #: with the cone test: pore water (eps < 1) whose <rho> is below ground_tension_fill of its rest value
     #: is a candidate of that test, whatever eq 34's count says. A front that enters dry ground as a sheet
     #: at the free water's spacing passes the count, which is scaled to the pore lattice, and as an

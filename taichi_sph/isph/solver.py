@@ -148,6 +148,8 @@ class ISPHSolver(SolverCommon):
         self.drained_candidate = sw.ground_drained
         # eq 31's stabilisation reads pore water over the pore lattice's support (_k_pore_density)
         self.pore_density = sw.pore_density
+        # ... only where that support lies in uniform ground (isph.ground_density_support interior)
+        self.pore_interior = sw.pore_interior
         # kernel-gradient correction in the ground (L_i = M_i^-1 where eps_i < 1), else plain eq 12 there
         self.ground_correction = sw.ground_correction
         #: candidate of the cone test (in or next to the ground): eq 34's count or the plain count marks it,
@@ -192,6 +194,8 @@ class ISPHSolver(SolverCommon):
         #: with isph.ground_density_support pore: pore water's <rho> over the pore lattice's support, its
         #: rest fill (over the packing of the block it was placed in, `packing`, read at t = 0)
         self.rho_pore = ti.field(float, n)
+        #: 1 where eq 31 reads rho_pore (with interior: the support in uniform ground), 0 where it reads r_e
+        self.pore_read = ti.field(ti.i32, n)
         self.rest_fill_pore = ti.field(float, n)
         self.rest_fill_pore.fill(1.0)
         self.packing = ti.field(float, n)
@@ -762,7 +766,9 @@ class ISPHSolver(SolverCommon):
         2 r_e; isph.ground_density_support pore), for eq 31's stabilisation. On the pore lattice that
         support holds as many neighbours as r_e holds in free water, and the sum reads eps_i rho_w (the
         kernel widened by the lattice's own scale). Neighbours count as in _k_density (_density_share);
-        the cells within the support are searched (the grid's cells are r_e wide)."""
+        the cells within the support are searched (the grid's cells are r_e wide). `pore_read` says where
+        eq 31 takes this reading: everywhere in ground, or (interior) where every water particle within
+        the support has the particle's own porosity, so that water on eq 32's ramp is read over r_e."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1 and self.eps[i] < 1.0:
@@ -770,6 +776,7 @@ class ISPHSolver(SolverCommon):
                 hp = ti.min(ti.pow(self.eps[i], -1.0 / self.dim), 2.0) * self.h
                 reach2 = 4.0 * hp * hp
                 wsum = kernels.w(0.0, hp, self.dim)
+                uniform = 1
                 for off in ti.grouped(ti.ndrange(*([(-2, 3)] * self.dim))):
                     if self.grid.cell_gap2(xi, off) < reach2:
                         a, b = self.grid.cell_range(xi, off)
@@ -779,7 +786,11 @@ class ISPHSolver(SolverCommon):
                                 r = operators.rel(xi, self.x[j], self.period).norm()
                                 if r < 2.0 * hp:
                                     wsum += self._density_share(i, j) * kernels.w(r, hp, self.dim)
+                                    if ti.static(self.pore_interior):  # noqa: SIM102 (compiled only with it)
+                                        if self.kind[j] == WATER and ti.abs(self.eps[j] - self.eps[i]) > 1e-6:
+                                            uniform = 0
                 self.rho_pore[i] = self.mass * wsum / self.kernel_sum
+                self.pore_read[i] = uniform
 
     @ti.func
     def _density_share(self, i, j):
@@ -837,8 +848,11 @@ class ISPHSolver(SolverCommon):
                     if ti.static(self.pore_density):  # noqa: SIM102 (compiled only with the option)
                         if self.eps[i] < 1.0:
                             # over the block's packing: its rounding is water above or below the pores,
-                            # which the stabilisation is to relax (42 particles for 40 in the 10 mm plug)
-                            fill = self.rho_pore[i] / (self.eps[i] * self.rho_w * self.packing[i])
+                            # which the stabilisation is to relax (42 particles for 40 in the 10 mm plug);
+                            # water read over r_e at t = 0 (interior: on a ramp) fills its pores
+                            fill = 1.0
+                            if self.pore_read[i] == 1:
+                                fill = self.rho_pore[i] / (self.eps[i] * self.rho_w * self.packing[i])
                             self.rest_fill_pore[i] = ti.min(ti.max(fill, 0.8), 1.25)
 
     @ti.kernel
@@ -1001,7 +1015,7 @@ class ISPHSolver(SolverCommon):
                     div /= rb_i
                     stab = terms.density_stabilisation(self.alpha, eps_i, self._rest_density(i), self.rho_n[i], dt)
                     if ti.static(self.pore_density):  # noqa: SIM102 (compiled only with the option)
-                        if eps_i < 1.0:
+                        if eps_i < 1.0 and self.pore_read[i] == 1:
                             stab = terms.density_stabilisation(self.alpha, eps_i, eps_i * self.rho_w
                                                                * self.rest_fill_pore[i], self.rho_pore[i], dt)
                     if ti.static(self.porous):
