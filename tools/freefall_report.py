@@ -114,11 +114,14 @@ def analyse(path):
 
 
 def options(isph):
-    """Shifting / collisions / advection of a run, with the schema's defaults (config/isph.py)."""
+    """Shifting / collisions / advection of a run, with the schema's defaults (config/isph.py), and eq 31's
+    support in the ground where it is not the default's (isph.ground_density_support)."""
     shift = float(isph.get("shifting", 2.0))
     coll = float(isph.get("collision_distance", 0.8))
     on = lambda v: "off" if v == 0 else f"{v:g}"
-    return f"{on(shift)} / {on(coll)} / {isph.get('advection', 'pore')}"
+    support = isph.get("ground_density_support", "particle")
+    extra = "" if support == "particle" else f", eq 31 over the {support} support"
+    return f"{on(shift)} / {on(coll)} / {isph.get('advection', 'pore')}{extra}"
 
 
 def row(r):
