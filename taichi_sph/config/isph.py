@@ -131,9 +131,9 @@ class ISPH(Strict):
     #: lattice's support"). Its rest state at t = 0 is taken over the packing of the block the water
     #: was placed in (scene.packing). "interior": the pore support where it lies in uniform ground (every
     #: water particle within it of the particle's own porosity), r_e elsewhere: water crossing eq 32's
-    #: ramp into the ground, pressed at the free water's spacing, is read over r_e, where the pore
-    #: support spread its excess over the pores behind it and the plug held 1.5-2 % more than its pores
-    #: (docs/isph.md, "The pore support in uniform ground only")
+    #: ramp into the ground, pressed at the free water's spacing, is read over r_e (with "pore" the
+    #: 5 mm plug held 1.015-1.021 of its pores, with "interior" 1.008-1.014; docs/isph.md, "The pore
+    #: support in uniform ground only")
     ground_density_support: Literal["particle", "pore", "interior"] = "particle"
     #: with the cone test: pore water (eps < 1) whose <rho> is below ground_tension_fill of its rest value
     #: is a candidate of that test, whatever eq 34's count says. A front that enters dry ground as a sheet
