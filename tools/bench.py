@@ -280,6 +280,12 @@ def markdown(results, info) -> str:
                   + "; ".join(f"{r['mode']} {r['dim']}D {r['size']} {r['arch']} "
                               f"{1e3 * r['baseline_seconds_per_step']:.1f} -> {1e3 * r['seconds_per_step']:.1f} ms/step "
                               f"({r['baseline_seconds_per_step'] / r['seconds_per_step']:.2f}x)" for r in based) + "."]
+    jits = [r for r in results if "baseline_jit_seconds" in r]
+    if jits:
+        lines += ["", "JIT against the baseline (cold / warm, the baseline's first): "
+                  + "; ".join(f"{r['mode']} {r['dim']}D {r['size']} {r['arch']} {r['baseline_jit_cold_seconds']:.2f} / "
+                              f"{r['baseline_jit_seconds']:.2f} -> {r['jit_cold_seconds']:.2f} / {r['jit_seconds']:.2f} s"
+                              for r in jits) + "."]
     return "\n".join(lines)
 
 
@@ -374,10 +380,14 @@ def main(argv=None) -> int:
                     ppes = args.ppe if mode.startswith("isph") else [None]
                     for ppe in ppes:  # back to back, so that load from elsewhere hits them alike
                         pspec = spec if ppe is None else {**spec, "set": {**overrides, "isph.ppe.type": ppe}}
-                        jit = None
+                        jit = base_jit = None
                         if size == sizes[0] and not args.no_jit:
-                            # one step with an empty offline cache (cold JIT), then again with it filled (warm)
+                            # one step with an empty offline cache (cold JIT), then again with it filled (warm);
+                            # the baseline's the same way, first, in a cache of its own
                             one = {**pspec, "min_time": 0.0, "max_steps": 1, "warmup": 0, "kernel_profile": 0}
+                            if args.baseline is not None:
+                                with tempfile.TemporaryDirectory() as tmp:
+                                    base_jit = [spawn(one, Path(tmp), args.baseline) for _ in range(2)]
                             with tempfile.TemporaryDirectory() as tmp:
                                 jit = [spawn(one, Path(tmp)) for _ in range(2)]
                         base = None
@@ -389,12 +399,19 @@ def main(argv=None) -> int:
                         if jit is not None and not any("error" in j for j in (*jit, r)):
                             r["jit_cold_seconds"] = jit[0]["jit_seconds"]
                             r["jit_seconds"] = jit[1]["jit_seconds"]
+                            if base_jit is not None and not any("error" in j for j in base_jit):
+                                r["baseline_jit_cold_seconds"] = base_jit[0]["jit_seconds"]
+                                r["baseline_jit_seconds"] = base_jit[1]["jit_seconds"]
                         results.append(r)
                         msg = r.get("error") or (f"{r['water_particles']} particles, {r['mipps']:.3f} M particle-steps/s, "
                                                  f"{1e3 * r['seconds_per_step']:.1f} ms/step")
                         if r.get("baseline_seconds_per_step"):
                             msg += (f" (baseline {1e3 * r['baseline_seconds_per_step']:.1f} ms/step, "
                                     f"{r['baseline_seconds_per_step'] / r['seconds_per_step']:.2f}x)")
+                        if "baseline_jit_seconds" in r:
+                            msg += (f"; JIT cold / warm {r['baseline_jit_cold_seconds']:.2f} / "
+                                    f"{r['baseline_jit_seconds']:.2f} s -> {r['jit_cold_seconds']:.2f} / "
+                                    f"{r['jit_seconds']:.2f} s")
                         print(f"{mode} {ppe or ''} {dim}D {size} {arch}: {msg}", flush=True)
                         for row in r.get("kernel_profile", []):
                             print(f"    {row['ms_per_step']:9.3f} ms/step {row['launches_per_step']:6.2f} launches/step "
