@@ -63,11 +63,12 @@ def test_sparse_and_ell_give_the_same_pressure(ti_cpu, case, extra, ell_tol):
         assert ell.ppe.dtype == ti_cpu.f32
     # and a non-trivial pressure field was solved: hydrostatic, rho g H = 1.5 kPa at the bottom; the
     # Darcy slab drains freely (no head), so its water is at the surface value rho_w g dx / 2 = 49 Pa
-    # throughout, measured 49.0-51.9 Pa in these first steps (the walls' pressure follows the water's
-    # own gradient along their faces, not hydrostatics)
+    # throughout: measured 49.05-49.41 Pa in these first steps (49.0-51.9 Pa while the shift's
+    # anti-pairing pushed the pore water off the slip walls; tests/test_isph_porous.py follows the slab
+    # to 0.3 s); bound 0.5 Pa
     if case == "darcy_column.yaml":
         p_w = p_s[sparse.fields_by_id()["porosity"] < 1.0]
-        assert np.all(np.abs(p_w - 49.05) < 5.0), (p_w.min(), p_w.max())
+        assert np.all(np.abs(p_w - 49.05) < 0.5), (p_w.min(), p_w.max())
     else:
         assert np.max(np.abs(p_s)) > 100.0
 

@@ -202,17 +202,18 @@ def _darcy(setting):
 PERMEAMETER_PLUG = (0.30, 0.40, 0.4, 0.01)  # configs/permeameter.yaml: plug bottom, top (m), eps0, D50 (m)
 PERMEAMETER_END = 0.44  # s: the ODE's level falls from 0.2 to 0.1 m (the first half of the drain) by 0.44 s
 PERMEAMETER_SPREAD = 0.03  # bound on the spread over dt at one dx
-#: what runs at other fixed steps than the grid's showed, by dx (measured 2026-11-28, one thread; docs/isph.md)
+#: what runs at other fixed steps than the grid's showed, by dx (docs/isph.md)
 PERMEAMETER_SPREAD_NOTES = {
-    0.01: "the level has two branches about 4.5 points apart over dt, near -4 % (0.4-0.75 ms) and near -8 % "
-          "(0.25-0.3 and 0.9-1.1 ms); eq 31's stabilisation sets them (with alpha 0: -4.4 / -5.2 / -5.4 % at 1 / "
-          "0.25 / 0.5 ms). The spread of 1.9 points read here before drained pore water became a candidate of "
-          "the cone test held only at the exact spacing: with dx moved by a part in 10^7 that code's 0.5 ms "
-          "run reads -4.2..-4.5 % instead of -6.3 % (docs/isph.md, \"The 10 mm plug's two branches\" and "
-          "\"Drained pore water a candidate of the cone\"). With eq 31 read over the pore lattice's support "
-          "(isph.ground_density_support: pore, an option) the grid reads -7.1 / -6.7 / -7.4 % at 0.25 / 0.5 / 1 "
-          "ms, 0.68 points apart (0.84 / 0.35 at 5 / 2.5 mm), but 3.9 points over 0.25-1.1 ms (docs/isph.md, "
-          "\"The stabilisation over the pore lattice's support\")",
+    0.01: "measured 2026-11-28, before the shift's anti-pairing took a wall pair at the pore water's rest "
+          "distance from the wall (docs/isph.md, \"The shift's anti-pairing at walls in the ground\"), one "
+          "thread: the level had two branches about 4.5 points apart over dt, near -4 % (0.4-0.75 ms) and "
+          "near -8 % (0.25-0.3 and 0.9-1.1 ms), set by eq 31's stabilisation (with alpha 0: -4.4 / -5.2 / "
+          "-5.4 % at 1 / 0.25 / 0.5 ms), and the grid read 4.65 points (docs/isph.md, \"The 10 mm plug's two "
+          "branches\"); since that change 3.38 points with one thread. With eq 31 read over the pore "
+          "lattice's support (isph.ground_density_support: pore, an option) the grid reads -8.4 / -8.2 / "
+          "-5.7 % at 0.25 / 0.5 / 1 ms, 2.83 points apart (before the change -7.1 / -6.7 / -7.4 %, 0.68 "
+          "points, and 3.9 points over 0.25-1.1 ms; docs/isph.md, \"The stabilisation over the pore "
+          "lattice's support\")",
 }
 
 
@@ -746,19 +747,19 @@ DIAGNOSES = {
                 "(porosity.bulk_front_arrival, the 1D front's arrival, where the seed reads about eps0 of the "
                 "water in the layer), interpolated between frames every 0.01 s; it moves as rows cross the "
                 "layer's top, so at these spacings it is read to a row. It converges on the seed's figure as dx "
-                "falls (alpha 0.01: 0.438 / 0.399 / 0.370 s at 4 / 2.86 / 2 cm, fitted order 1.7). Beside it the "
+                "falls (alpha 0.01: 0.438 / 0.402 / 0.350 s at 4 / 2.86 / 2 cm, fitted order 3.3). Beside it the "
                 "lowest particle's arrival (its centre within dx/2 of the layer's bottom), which does not "
-                "converge (0.31 / 0.30 / 0.31 s) and the fraction in the layer read then (0.40 / 0.43 / 0.43). "
+                "converge (0.31 / 0.31 / 0.31 s) and the fraction in the layer read then (0.40 / 0.42 / 0.44). "
                 "Volume drift over 0.6 s only (the target is over 2.5 s; the measure dips as the cube enters the "
-                "ground, docs/freefall.md). At the seed's 1 cm (docs/freefall.md, \"The water body's "
-                "arrival\") the water body arrives at 0.405 / 0.335 / 0.250 s at dt 1 ms and 0.400 / 0.335 / "
-                "0.245 s at 0.5 ms for eps0 0.3 / 0.5 / 0.8 (within 6 % of the seed's 0.42 / 0.34 / 0.26 s, "
-                "within 3.6 % of the 1D front's 0.391 / 0.324 / 0.250 s), the lowest particle at 0.372 / "
-                "0.323 / 0.257 s and 0.383 / 0.328 / 0.253 s (eps0 0.3 -11.5 / -8.7 % of the seed's), with "
-                "0.282 / 0.489 / 0.800 and 0.288 / 0.496 / 0.812 of the water in the layer then. The share of "
-                "the water below the layer's top follows the 1D front within 0.034 of the water at 1 cm and "
-                "0.062 at 2 cm, dt 1 and 0.5 ms (docs/freefall.md, \"Against the one-dimensional front\"). "
-                "The earlier readings, with the code of each date, are in docs/freefall.md.",
+                "ground, docs/freefall.md). At the seed's 1 cm (docs/freefall.md, \"Where it stands\"; one "
+                "thread) the water body arrives at 0.393 / 0.330 / 0.250 s at dt 1 ms for eps0 0.3 / 0.5 / 0.8 "
+                "(within 6.4 % of the seed's 0.42 / 0.34 / 0.26 s, within 1.9 % of the 1D front's 0.391 / 0.324 "
+                "/ 0.250 s) and at 0.392 s at 0.5 ms for eps0 0.3, the lowest particle at 0.374 / 0.325 / 0.257 "
+                "s (eps0 0.3 -11.0 % of the seed's; 0.367 s at 0.5 ms), with 0.293 / 0.498 / 0.800 of the water "
+                "in the layer then. The share of the water below the layer's top follows the 1D front within "
+                "0.065 of the water at 2 cm, dt 1 and 0.5 ms (0.034 at 1 cm, measured before the shift's "
+                "anti-pairing change; docs/freefall.md, \"Against the one-dimensional front\"). The earlier "
+                "readings, with the code of each date, are in docs/freefall.md.",
 }
 
 
