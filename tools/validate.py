@@ -755,7 +755,7 @@ DIAGNOSES = {
                 "thread) the water body arrives at 0.393 / 0.330 / 0.250 s at dt 1 ms for eps0 0.3 / 0.5 / 0.8 "
                 "(within 6.4 % of the seed's 0.42 / 0.34 / 0.26 s, within 1.9 % of the 1D front's 0.391 / 0.324 "
                 "/ 0.250 s) and at 0.392 s at 0.5 ms for eps0 0.3, the lowest particle at 0.374 / 0.325 / 0.257 "
-                "s (eps0 0.3 -11.0 % of the seed's; 0.367 s at 0.5 ms), with 0.293 / 0.498 / 0.800 of the water "
+                "s (eps0 0.3 -11.0 % of the seed's; 0.365 s at 0.5 ms), with 0.293 / 0.498 / 0.800 of the water "
                 "in the layer then. The share of the water below the layer's top follows the 1D front within "
                 "0.065 of the water at 2 cm, dt 1 and 0.5 ms (0.034 at 1 cm, measured before the shift's "
                 "anti-pairing change; docs/freefall.md, \"Against the one-dimensional front\"). The earlier "
