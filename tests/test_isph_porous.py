@@ -264,7 +264,7 @@ def test_air_entry_suction_keeps_the_permeameter_on_the_ode(tmp_path):
     half at dt 1 and 0.5 ms, within the acceptance's 3 % and the time steps within 3 points of each
     other: the clamp acts on the draining ground's tension, not on the plug's Darcy flow. Measured (one
     run each, the suite's threads): largest deviation 0.77 / 2.18 % at dt 1 / 0.5 ms, the time steps
-    within 1.4 points of each other (without the key, one thread: 0.82 / 2.23 %, 1.4 points; before the
+    within 1.4 points of each other (without the key, one thread: 0.77 / 2.18 %, 1.4 points; before the
     shift's anti-pairing took a wall pair at the pore water's rest distance from the wall, docs/isph.md,
     0.46 / 1.43 %, 1.2 points, and without the key 0.46 / 1.38 %, 1.1 points; before pore water in
     drained ground joined the tension rule 0.50 / 1.57 %, 1.1 points; before the corrector took each particle's own wall pressure
@@ -459,8 +459,8 @@ def test_permeameter_core_is_not_free_surface(permeameter_runs):
 def test_permeameter_core_holds_its_pore_volume(permeameter_runs):
     """While the water seeps through, the plug's core holds its pore volume of water: counted without a
     kernel (each particle a slab of the pore rows' spacing, its bulk volume dx^2 / eps0, over the core's
-    area; permeameter_runs), time mean over 0.1-0.44 s, 1.008 / 1.018 at dt 1 / 0.5 ms (frames
-    0.990-1.027 / 0.996-1.032; one thread). Counted by centres, as this test did before, 1.010 / 1.021
+    area; permeameter_runs), time mean over 0.1-0.44 s, 1.007 / 1.017 at dt 1 / 0.5 ms (frames
+    0.990-1.026 / 0.996-1.031; one thread). Counted by centres, as this test did before, 1.010 / 1.020
     (frames 0.95-1.08: a row of pore water is a tenth of the core). Before the shift's anti-pairing took
     a wall pair at the pore water's rest distance from the wall (docs/isph.md), by centres 0.994 / 1.003
     and, in a second one-thread run, 1.014 / 1.004 (slabs 1.014 / 1.002); 0.999 / 0.998 before pore water
