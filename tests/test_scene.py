@@ -10,8 +10,8 @@ from taichi_sph import scene
 def test_overlap_mask_is_the_same_by_pairs_and_by_k_d_tree(monkeypatch, dim):
     """`remove_overlaps` compares small point sets pair by pair and larger ones with scipy's k-d tree
     (BRUTE_FORCE_PAIRS): both give the mask of the points farther than `dist` from every point of the
-    other set, also where lattice points lie `dist` apart to round-off (the shipped scenes' case: walls
-    half a spacing off the water's lattice). The shipped configs' scenes are the same either way
+    other set, also where lattice points of the two sets lie `dist` apart to round-off. The shipped
+    configs' scenes are the same either way
     (every short run bit for bit, tools/behaviour_check.py)."""
     rng = np.random.default_rng(7)
     dx = 0.01
