@@ -266,13 +266,9 @@ def remove_overlaps(keep: np.ndarray, others: np.ndarray, dist: float) -> np.nda
     """Mask of `keep` points farther than `dist` from every point of `others`."""
     if len(others) == 0 or len(keep) == 0:
         return np.ones(len(keep), dtype=bool)
-    if len(keep) * len(others) <= BRUTE_FORCE_PAIRS:
-        far = np.empty(len(keep), dtype=bool)
-        rows = max(1, 1_000_000 // len(others))  # ~1e6 pairs at a time
-        for a in range(0, len(keep), rows):
-            d2 = ((keep[a:a + rows, None, :] - others[None, :, :]) ** 2).sum(axis=-1).min(axis=1)
-            far[a:a + rows] = np.sqrt(d2) > dist
-        return far
+    if len(keep) * len(others) <= BRUTE_FORCE_PAIRS:  # all pairs at once: at most ~24 MB in 3D
+        d2 = ((keep[:, None, :] - others[None, :, :]) ** 2).sum(axis=-1).min(axis=1)
+        return np.sqrt(d2) > dist
     from scipy.spatial import cKDTree  # noqa: PLC0415  (scene building only)
 
     d, _ = cKDTree(others).query(keep, k=1)
