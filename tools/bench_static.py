@@ -3,9 +3,11 @@
 Mode isph compiles porous ground (soil markers, eq 32 porosity, drag of eq 9) and Smagorinsky
 turbulence (eq 3) behind `ti.static(self.porous)` and `ti.static(self.turbulence)`, and skips
 their Python-side calls with plain `if`. This tool builds a second solver class with that code
-*absent*: it parses taichi_sph/isph/solver.py, replaces every `if` whose condition names
-`self.porous` or `self.turbulence` by its `else` branch (the code a scene without them would run),
-writes the result to a temporary module and imports it beside the original. Then it runs the same
+*absent*: it parses taichi_sph/isph/solver.py and the modules of its mixins (surface.py,
+shifting.py, ground_density.py), replaces every `if` whose condition names `self.porous` or
+`self.turbulence` by its `else` branch (the code a scene without them would run), writes the results to
+temporary modules (the stripped solver importing the stripped mixins) and imports them beside the
+originals. Then it runs the same
 free-water scene (the 2D dam break of configs/dambreak.yaml, fixed dt) with both classes in one
 process, interleaving chunks of steps so that load from other processes hits both alike, and
 reports the best and median chunk time of each. It also checks that both give bitwise the same
@@ -63,19 +65,29 @@ class _Strip(ast.NodeTransformer):
         return node
 
 
+#: the modules of taichi_sph/isph/ that hold ISPHSolver's code: its mixins first, the solver last
+SOLVER_MODULES = ("surface", "shifting", "ground_density", "solver")
+
+
 def stripped_solver_class(tmpdir: Path):
-    """ISPHSolver with the feature code removed, as a module in the taichi_sph.isph package."""
-    src = (ROOT / "taichi_sph" / "isph" / "solver.py").read_text()
-    tree = ast.parse(src)
+    """ISPHSolver with the feature code removed from it and its mixins, as modules in the taichi_sph.isph
+    package (`<module>_without_features`, the stripped solver importing the stripped mixins)."""
     strip = _Strip()
-    tree = ast.fix_missing_locations(strip.visit(tree))
-    path = tmpdir / "solver_without_features.py"
-    path.write_text(ast.unparse(tree))
-    name = "taichi_sph.isph.solver_without_features"
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod
-    spec.loader.exec_module(mod)
+    mod = None
+    for stem in SOLVER_MODULES:
+        tree = ast.parse((ROOT / "taichi_sph" / "isph" / f"{stem}.py").read_text())
+        tree = strip.visit(tree)
+        for node in ast.walk(tree):  # from .surface import SurfaceTests -> from .surface_without_features ...
+            if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module in SOLVER_MODULES:
+                node.module = f"{node.module}_without_features"
+        tree = ast.fix_missing_locations(tree)
+        path = tmpdir / f"{stem}_without_features.py"
+        path.write_text(ast.unparse(tree))
+        name = f"taichi_sph.isph.{stem}_without_features"
+        spec = importlib.util.spec_from_file_location(name, path)
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[name] = mod
+        spec.loader.exec_module(mod)
     return mod.ISPHSolver, strip.removed
 
 

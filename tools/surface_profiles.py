@@ -36,7 +36,7 @@ from scipy.spatial import cKDTree
 from taichi_sph.io.hdf5 import RunFile
 
 SUPPORT = 2.4  # r_e / dx (sph/kernels.SUPPORT_FACTOR)
-BODY_LINK = 0.9  # of r_e: two water particles closer than this belong to one body (isph/solver.py)
+BODY_LINK = 0.9  # of r_e: two water particles closer than this belong to one body (isph/surface.py)
 
 
 def water_body(pos: np.ndarray, dx: float, floor: float) -> np.ndarray:

@@ -16,7 +16,10 @@ One step (projection method, eqs 18-31), all particles water or wall:
 5. advection x += dt v / eps (pore velocity) or dt v (Darcy velocity, `advection: darcy`).
 
 The kernels loop over each particle's neighbours (`_pair`; `_volume` and `_mass_and_density` say what a
-water or wall neighbour stands for) and call the terms of terms.py; walls are sph/walls.py's.
+water or wall neighbour stands for) and call the terms of terms.py; walls are sph/walls.py's. Three parts
+of the step are mixins of ISPHSolver, each in its own module: surface.py (the free-surface tests beyond
+eq 34's count: closed bodies, the cone test in the ground), shifting.py (the particle shift) and
+ground_density.py (what pore water's number density is measured against in eq 31 and the surface tests).
 """
 
 
@@ -41,36 +44,19 @@ from ..sph.solver_common import SolverCommon
 from ..sph.wall_motion import WallMotion
 from . import porosity as _porosity
 from . import terms
+from .ground_density import GroundDensity
+from .shifting import SHIFT_NUMBER_MAX, SHIFT_SUBSTEPS_MAX, Shifting
+from .surface import SurfaceTests
 
 log = logging.getLogger("taichi_sph")
 
 GRAD_CORRECTED, GRAD_DIFFERENCE, GRAD_SYMMETRIC = 0, 1, 2
-#: sweeps of the lowest index through the water pairs per step (_closed_bodies): a body up to this many
-#: pair hops across is found whole (a pair hop is up to BODY_LINK r_e)
-BODY_SWEEPS = 6
-#: two water particles belong to one body (_closed_bodies) when closer than this fraction of r_e. Beyond
-#: it the pair's PPE coefficient (-dW/dr r / (r^2 + eta^2)) is below 2.2 % of its value at r = h: a cluster
-#: of pore water joined to the rest only by such pairs has a PPE block of its own in all but name, with
-#: no reference pressure. In the porous dam break at dx 5 mm such clusters of 2-4 particles in the dam,
-#: joined by one pair at 0.97-0.98 r_e (a coefficient 1e-3 of the block's), were solved to 1e6-3e8 Pa
-#: and thrown at 100-180 m/s (docs/isph.md, "Porous dam break")
-BODY_LINK = 0.9
-#: ... unless the pore lattice is sparser: neighbours on a pore lattice of spacing dx eps^(-1/dim) always
-#: join (the pairs within LATTICE_LINK spacings), or ground of eps below (LATTICE_LINK / (BODY_LINK 2.4))^dim
-#: would break into one-particle bodies, all made free surface
-LATTICE_LINK = 1.05
 #: most re-solves of the PPE per step after freeing water held in tension (_k_tension)
 TENSION_PASSES = 3
 #: inside saturated ground the kernel-gradient correction is kept where the implicit drag D = 1 + c (a + b |v|)
 #: is at least this: the projection's overshoot, up to 1 / lambda_min(M_i) ~ 3-5 on disordered pore water,
 #: carries into the next step divided by D (_k_corrector)
 DRAG_CORRECTED = 5.0
-#: the shifting is an explicit diffusion of the particles' concentration with coefficient A h |u|; where its
-#: number A |u| dt / h over the water in the ground exceeds this, the step's shift is taken in substeps,
-#: each with grad C at the positions the one before left (at most SHIFT_SUBSTEPS_MAX; docs/isph.md,
-#: "Shifting in substeps")
-SHIFT_NUMBER_MAX = 0.25
-SHIFT_SUBSTEPS_MAX = 4
 #: flags of a vertical wall particle in _k_wet: water within its support reaches its height (not more than
 #: 0.6 dx below it), and not all of that water hangs above it (some within 0.6 dx above it or lower)
 WET_REACHED, WET_NOT_HANGING = 2, 4
@@ -86,7 +72,7 @@ _GRAD = {"corrected": GRAD_CORRECTED, "difference": GRAD_DIFFERENCE, "symmetric"
 
 
 @ti.data_oriented
-class ISPHSolver(SolverCommon):
+class ISPHSolver(SurfaceTests, Shifting, GroundDensity, SolverCommon):
     """State and step of mode `isph`. Built from a validated Config and a Scene."""
 
     #: the density the guard checks (guard_fields): the same as fields_by_id reports
@@ -434,49 +420,6 @@ class ISPHSolver(SolverCommon):
         return vj
 
     @ti.func
-    def _anti_pairing_reference(self, i):
-        """The kernel at the spacing of water at i's porosity, W(dx / eps^(1/dim)) (the lattice spacing in
-        free water), against which the shift's anti-pairing term measures i's water pairs (`_grad_c_pair`)."""
-        w_ref = self.w_dx
-        if ti.static(self.porous and self.shifting):  # noqa: SIM102 (compile-time if)
-            if self.eps[i] < 1.0:
-                w_ref = kernels.w(self.dx * self.eps[i] ** (-1.0 / self.dim), self.h, self.dim)
-        return w_ref
-
-    @ti.func
-    def _wall_anti_pairing_reference(self, i):
-        """The kernel at the distance at which i rests from the first layer of a wall, against which the
-        shift's anti-pairing term measures i's wall pairs (`_grad_c_pair`): W(dx) in free water; water at
-        porosity eps rests at half its lattice spacing s = dx / eps^(1/dim) from the wall's face, so at
-        (dx + s) / 2 from the first wall layer (dx / 2 behind the face): 1.29 dx at eps 0.4 in 2D."""
-        w_wall = self.w_dx
-        if ti.static(self.porous and self.shifting):  # noqa: SIM102 (compile-time if)
-            if self.eps[i] < 1.0:
-                w_wall = kernels.w(0.5 * self.dx * (1.0 + self.eps[i] ** (-1.0 / self.dim)), self.h, self.dim)
-        return w_wall
-
-    @ti.func
-    def _grad_c_pair(self, j, vj, r, gw, w_ref, w_wall):
-        """A pair's term of the shift's grad C: V_j (1 + 0.2 (W_ij / W_ref)^4) grad W_ij (Lind et al. 2012's
-        anti-pairing term), W_ref = w_ref for a water neighbour j (`_anti_pairing_reference`), w_wall for a
-        wall particle (`_wall_anti_pairing_reference`; the same W(dx) in free water).
-
-        Measured against the pore lattice's W(s), as wall pairs of pore water were before, a wall pair at
-        eps 0.4 in 2D carried 8.7 times its V_j grad W at the rest distance (120 times at dx; against
-        W((dx + s) / 2) 1.2 times, as every pair at its rest distance in free water), and the shift pushed
-        the pore water off the walls wherever it flowed. In the Darcy slab (configs/darcy_column.yaml, slip
-        walls) the columns beside the walls moved in by 0.9 mm in 60 ms and compressed the water between
-        them, and eq 31 answered with up to +28.7 / +57 Pa over the surface value at dt 1 / 0.5 ms, where
-        a slab draining under gravity alone has none (+9.9 / +17 Pa since; docs/isph.md, "The shift's
-        anti-pairing at walls in the ground")."""
-        ref = w_ref
-        if ti.static(self.porous):  # noqa: SIM102 (compile-time if)
-            if self.kind[j] == WALL:
-                ref = w_wall
-        ratio = kernels.w(r, self.h, self.dim) / ref
-        return vj * (1.0 + 0.2 * ratio**4) * gw
-
-    @ti.func
     def _mass_and_density(self, i, j):
         """Mass m_j and reference density rho_bar_j neighbour j carries in i's momentum and PPE sums: its
         own (m, eps_j rho_w) for water; a wall particle stands for water at i's porosity (eps_i m,
@@ -557,330 +500,6 @@ class ISPHSolver(SolverCommon):
                     if det > 0.1:
                         Li = M.inverse()
                 self.L[i] = Li
-
-    def _closed_bodies(self):
-        """Every body of water gets a Dirichlet row. A body (water particles joined by pairs within the
-        support) that holds no free-surface particle while the rest of the water has some, a cluster of
-        a few particles in the pores or the air that eq 34 and the cone test read as interior, has a PPE
-        block with no reference pressure: CG does not converge on it (relative residual 32 after 2000
-        iterations for a 2 x 2 drop in the air). A body of fewer particles than eq 34's free-water
-        threshold N_surf (17 in 2D, 48 in 3D) cannot hold a particle with a full support of water, so
-        all of it is free surface (a drop); a larger one gets one Dirichlet row, on its particle with the
-        fewest water neighbours, which fixes its pressure level and keeps it incompressible. Bodies are
-        found by propagating the lowest index through the water pairs, BODY_SWEEPS times; a body not
-        settled by then (wider than that many pair hops) is left as it is: it is large, and a large body
-        has a surface the tests find. The pair test (`_water_pair`) is taken once per step into
-        `body_link`, and the sweeps stop at the first that changes no label (the labels are then final):
-        the same labels as six full sweeps, at a third of the cost (coarse free fall, 2 threads: 2.3
-        against 6.9 ms of a 28-41 ms step). Only with porous ground
-        (`soil`): in free water eq 34's count finds every drop (a body of fewer than N_surf particles has
-        no particle with N_surf neighbours)."""
-        self._k_body_init()
-        for _ in range(BODY_SWEEPS):
-            self.body_changed[None] = 0
-            self._k_body_sweep()
-            if self.body_changed[None] == 0:
-                break
-        self._k_body_close()
-
-    @ti.func
-    def _body_reach(self, eps):
-        """The pair test's distance at porosity eps: BODY_LINK r_e, or LATTICE_LINK pore-lattice spacings
-        dx eps^(-1/dim) where that is farther (ground of eps below ~0.24 in 2D, ~0.11 in 3D, whose lattice
-        neighbours lie beyond BODY_LINK r_e), never beyond r_e. It does not grow with eps."""
-        return ti.min(ti.max(BODY_LINK * self.re, LATTICE_LINK * self.dx * ti.pow(eps, -1.0 / self.dim)), self.re)
-
-    @ti.func
-    def _water_pair(self, i, j) -> ti.i32:
-        """Whether i and j are water of one body: both solved and closer than the reach (_body_reach) of
-        the sparser of the two, the larger of their two reaches (body_reach, taken per particle: a power
-        per pair cost as much as the rest of the body search)."""
-        ok = 0
-        if self.kind[j] == WATER and self.solve_mask[j] == 1 and j != i:
-            link = ti.max(self.body_reach[i], self.body_reach[j])
-            if operators.rel(self.x[i], self.x[j], self.period).norm() < link:
-                ok = 1
-        return ok
-
-    @ti.kernel
-    def _k_body_init(self):
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            self.body[i] = i
-            self.body_free[i] = 0
-            self.body_open[i] = 0
-            self.body_pick[i] = ti.i64(1) << 62
-            self.body_size[i] = 0
-            if self.solve_mask[i] == 1:
-                self.body_reach[i] = self._body_reach(self.eps[i])
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.solve_mask[i] == 1:
-                for k in range(self.grid.nbr_count[i]):
-                    self.body_link[i, k] = ti.cast(self._water_pair(i, self.grid.nbr[i, k]), ti.i8)
-
-    @ti.kernel
-    def _k_body_sweep(self):
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.solve_mask[i] == 1:
-                lowest = self.body[i]
-                for k in range(self.grid.nbr_count[i]):
-                    if self.body_link[i, k] == 1:
-                        lowest = ti.min(lowest, self.body[self.grid.nbr[i, k]])
-                if ti.atomic_min(self.body[i], lowest) > lowest:
-                    self.body_changed[None] = 1
-
-    @ti.kernel
-    def _k_body_close(self):
-        self.closed_bodies[None] = 0
-        self.any_free[None] = 0
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.solve_mask[i] == 1:
-                b = self.body[i]
-                if self.free[i] == 1:
-                    self.body_free[b] = 1
-                    self.any_free[None] = 1
-                count = 0
-                for k in range(self.grid.nbr_count[i]):
-                    if self.body_link[i, k] == 1:
-                        count += 1
-                        if self.body[self.grid.nbr[i, k]] != b:
-                            self.body_open[b] = 1
-                ti.atomic_min(self.body_pick[b], ti.i64(count) * ti.i64(self.n) + ti.i64(i))
-                ti.atomic_add(self.body_size[b], 1)
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.solve_mask[i] == 1 and self.any_free[None] == 1:
-                b = self.body[i]
-                if self.body_free[b] == 0 and self.body_open[b] == 0:
-                    pick = self.body_pick[b] % ti.i64(self.n) == ti.i64(i)
-                    if pick or self.body_size[b] < self.n_surf:
-                        self.free[i] = 1
-                    if pick:
-                        ti.atomic_add(self.closed_bodies[None], 1)
-
-    @ti.kernel
-    def _k_surface_cone(self):
-        """Free surface in and next to porous ground: eq 34's candidates confirmed by an empty cone.
-
-        A water particle in the ground (eps_i < 1), with a neighbour there, or within the markers' reach
-        (the outer half of a face's ramp, where eq 32 still gives eps 1 but the pore water below is
-        sparse) is a candidate when eq 34's count marked it free, or (in free water) when the plain count
-        of its neighbours is below N_surf: below a plug's exit face the filled-volume count reads the pore
-        water as full, so water hanging there was never free and sucked on the plug. In the ground it is a
-        candidate too where it has drained, <rho_i> below isph.ground_tension_fill of its rest value
-        (isph.ground_drained_candidate): a front entering dry ground as a sheet at the free water's spacing
-        passes the count, and held as an interior row its deficit was pulled on by eq 31's term (docs/isph.md,
-        "Drained pore water a candidate of the cone"). A candidate is free
-        surface only if no neighbour (water, or a wet wall) lies within the cone of half-angle
-        `isph.ground_surface_cone` about its outward normal n_i = -sum_j V_j grad W_ij (V_j the bulk
-        volume m / (eps_j rho_w), dx^d for a wall): the scan-region test of Marrone et al. (2010, J.
-        Comput. Phys. 229), with the support as its reach.
-        On a surface the half-space beyond it is empty whatever the arrangement; inside the ground a
-        disordered pore lattice lowers the count (6-8 neighbours within r_e in 2D at eps 0.4) but leaves
-        no empty cone, so it is not flagged (docs/isph.md, "Surface test in the ground"). An empty cone
-        counts only where air can reach it: the particle or a water neighbour was free surface at the end
-        of the last step, or the cone is empty out to 2 r_e (_cone_empty_beyond). A gap of a pore spacing
-        inside saturated ground, which the flow opens and closes from step to step, holds no air and is
-        not a surface: flagged, each such row was a sink for a step, and the flow into it was projected
-        out in one step when it closed (pressure spikes of 10-20 kPa in the permeameter's plug at dt
-        0.25 ms). A candidate with at most dim water neighbours is free whatever its cone: a drop of a few
-        particles hanging in a corner of walls, which block its cone, would otherwise have no Dirichlet row
-        (a singular block of the PPE, on which CG diverged)."""
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.solve_mask[i] == 1 and self.isolated[i] == 0:
-                xi = self.x[i]
-                near = self.eps[i] < 1.0 or self.ground_reach[i] == 1
-                plain = 0.0
-                n_water = 0
-                gsum = ti.Vector.zero(float, self.dim)
-                for k in range(self.grid.nbr_count[i]):
-                    j, rij, r = self._pair(i, k, xi)
-                    if not self._present(j):
-                        continue
-                    if self.kind[j] == WATER:
-                        n_water += 1
-                        if self.eps[j] < 1.0:
-                            near = True
-                    plain += 1.0
-                    if r > 0.0:
-                        gsum += self._volume(j) * kernels.grad_w(rij, r, self.h, self.dim)
-                self.candidate[i] = 0
-                if near:
-                    candidate = self.free[i] == 1
-                    if self.eps[i] >= 1.0 and plain < self.n_surf:
-                        candidate = True
-                    if ti.static(self.drained_candidate):  # noqa: SIM102 (compile-time if)
-                        if self._drained(i):
-                            candidate = True
-                    if candidate:
-                        self.candidate[i] = 1
-                    is_free = 0
-                    gn = gsum.norm()
-                    # a drop of a few particles hanging in a corner of walls, which block its cone: at most dim
-                    # water neighbours, in units of the pore lattice's count N(eps) / N(1) (a saturated corner
-                    # of eps 0.3 ground in 2D has 2 water neighbours, as its lattice holds 4 in the bulk)
-                    few = self.dim * 1.0
-                    if ti.static(self.n_surf > 0):
-                        if self.eps[i] < 1.0:
-                            few = self.dim * self._table_at(self.nsurf_tab, self.eps[i]) / self.n_surf
-                    if candidate and gn > 0.0:
-                        is_free = 1
-                        if n_water > few:
-                            n_out = -gsum / gn
-                            for k in range(self.grid.nbr_count[i]):
-                                j, rij, r = self._pair(i, k, xi)
-                                if self._present(j):
-                                    if self._in_cone(rij, r, n_out):
-                                        is_free = 0
-                            # air reaches an empty cone only from the air: from a surface there in the
-                            # last step (its own or a water neighbour's), or through a cone empty to 2 r_e
-                            if is_free == 1 and self.air_last[i] == 0:
-                                path = 0
-                                for k in range(self.grid.nbr_count[i]):
-                                    j = self.grid.nbr[i, k]
-                                    if self.kind[j] == WATER and self.air_last[j] == 1:
-                                        path = 1
-                                if path == 0:
-                                    path = self._cone_empty_beyond(i, xi, n_out)
-                                is_free = path
-                    # draining ground: scattered pore water with air between, a deficit of number
-                    # density with no empty cone (isph.ground_surface_density)
-                    if ti.static(self.ground_beta > 0.0):
-                        if self.rho_n[i] < self.ground_beta * self._rest_density(i):
-                            is_free = 1
-                    self.free[i] = is_free
-
-    @ti.func
-    def _in_cone(self, rij, r, n_out) -> ti.i32:
-        """Whether the neighbour at x_i - rij (distance r) lies in particle i's cone of half-angle
-        `isph.ground_surface_cone` about its outward normal n_out."""
-        return -rij.dot(n_out) >= self.cone_cos * r
-
-    @ti.func
-    def _cone_empty_beyond(self, i, xi, n_out) -> ti.i32:
-        """1 if no water particle (or wet wall) lies in particle i's cone about n_out out to twice the
-        support, where a surface (dry ground ahead of a front, the open space below a plug) has air and a
-        gap between pore particles has water beyond it: the grid's cells around x_i + 1.5 r_e n_out are
-        searched (the cone's part beyond that block, wide of its axis, is not)."""
-        q = xi + 1.5 * self.re * n_out
-        empty = 1
-        # a loop, not unrolled: unrolled over the 27 cells of 3D it doubled the compilation of the
-        # cone kernel's step (8 -> 18 s for the coarse free fall)
-        for off in ti.grouped(ti.ndrange(*([(-1, 2)] * self.dim))):
-            a, b = self.grid.cell_range(q, off)
-            for k in range(a, b):
-                if k != i and self.active[k] != 0 and self._present(k):
-                    rik = operators.rel(xi, self.x[k], self.period)
-                    r = rik.norm()
-                    if r < 2.0 * self.re and self._in_cone(rik, r, n_out):
-                        empty = 0
-        return empty
-
-    @ti.kernel
-    def _k_remember_air(self):
-        """The step's free-surface flags, where the next step's cone test looks for air (air_last)."""
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            self.air_last[i] = self.free[i]
-
-    @ti.kernel
-    def _k_pore_density(self):
-        """<rho_i> of pore water (eps_i < 1) over the pore lattice's support, r_e eps_i^(-1/dim) (at most
-        2 r_e; isph.ground_density_support pore), for eq 31's stabilisation. On the pore lattice that
-        support holds as many neighbours as r_e holds in free water, and the sum reads eps_i rho_w (the
-        kernel widened by the lattice's own scale). Neighbours count as in _k_density (_density_share);
-        the cells within the support are searched (the grid's cells are r_e wide). `pore_read` says where
-        eq 31 takes this reading: everywhere in ground, or (interior) where every water particle within
-        the support has the particle's own porosity, so that water on eq 32's ramp is read over r_e."""
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.solve_mask[i] == 1 and self.eps[i] < 1.0:
-                xi = self.x[i]
-                hp = ti.min(ti.pow(self.eps[i], -1.0 / self.dim), 2.0) * self.h
-                reach2 = 4.0 * hp * hp
-                wsum = kernels.w(0.0, hp, self.dim)
-                uniform = 1
-                for off in ti.grouped(ti.ndrange(*([(-2, 3)] * self.dim))):
-                    if self.grid.cell_gap2(xi, off) < reach2:
-                        a, b = self.grid.cell_range(xi, off)
-                        for j in range(a, b):
-                            if j != i and self.active[j] != 0 and (self.kind[j] == WATER or self.kind[j] == WALL) \
-                                    and self._present(j):
-                                r = operators.rel(xi, self.x[j], self.period).norm()
-                                if r < 2.0 * hp:
-                                    wsum += self._density_share(i, j) * kernels.w(r, hp, self.dim)
-                                    if ti.static(self.pore_interior):  # noqa: SIM102 (compiled only with it)
-                                        if self.kind[j] == WATER and ti.abs(self.eps[j] - self.eps[i]) > 1e-6:
-                                            uniform = 0
-                self.rho_pore[i] = self.mass * wsum / self.kernel_sum
-                self.pore_read[i] = uniform
-
-    @ti.func
-    def _density_share(self, i, j):
-        """What neighbour j adds to particle i's number density, in units of i's own particle: a water
-        particle its bulk volume m / (eps_j rho_w) over i's, eps_i / eps_j (a water particle in ground fills
-        1 / eps_j lattice cells, so the count and the density near a soil surface measure how full the
-        support is, not how many particles it holds; identical to counting particles where eps is
-        uniform); a wall particle water of mass eps_i m at the wall lattice (volume dx^d), eps_i."""
-        share = self.eps[i]
-        if self.kind[j] == WATER:
-            share = self.eps[i] / self.eps[j]
-        return share
-
-    @ti.func
-    def _rest_density(self, i):
-        """<rho_i> of water particle i at rest: eps_i rho_w, times its rest fill (_k_rest_fill) with porous
-        ground. Eq 31's stabilisation relaxes towards it; the ground's free-surface and tension rules
-        measure a drained pore against fractions of it."""
-        out = self.eps[i] * self.rho_w
-        if ti.static(self.porous):
-            out *= self.rest_fill[i]
-        return out
-
-    @ti.func
-    def _drained(self, i):
-        """Pore water (eps_i < 1) that has let air into its pores: <rho_i> below isph.ground_tension_fill of
-        its rest value. It is a candidate of the cone test (_k_surface_cone) and takes the tension rule
-        (_k_tension)."""
-        return self.eps[i] < 1.0 and self.rho_n[i] < self.tension_fill * self._rest_density(i)
-
-    @ti.kernel
-    def _k_rest_fill(self):
-        """Rest density of water that starts in or next to ground: <rho_i> / rho_bar_i at t = 0.
-
-        The kernel sum of a pore lattice is tabulated (K(eps)), but water placed in ground fills its
-        block on a lattice rounded to the block, and across a soil surface two lattices meet: <rho> at
-        rest differs from rho_bar there by a few per cent (measured: -6 % on the free-water side of a
-        surface over eps 0.3, +2 to +5 % inside). The eq 31 stabilisation would read that as a density
-        error; in free water particles move it away within steps, but in fine sand (D ~ 2000) the flow
-        that corrects it is D times slower, so the stabilisation pressure stays and adds up over the
-        ground's depth (+47 % at the bottom of 10 cm of sand). Taking the packing at t = 0 as the rest
-        state for these particles (only they, and clamped to [0.8, 1.25]) keeps the stabilisation
-        acting on compression and dilation since the start, as for free water."""
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.solve_mask[i] == 1 and self.free[i] == 0:
-                near = self.eps[i] < 1.0
-                for k in range(self.grid.nbr_count[i]):
-                    j = self.grid.nbr[i, k]
-                    if self.kind[j] == WATER and self.eps[j] < 1.0:
-                        near = True
-                if near:
-                    ratio = self.rho_n[i] / (self.eps[i] * self.rho_w)
-                    self.rest_fill[i] = ti.min(ti.max(ratio, 0.8), 1.25)
-                    if ti.static(self.pore_density):  # noqa: SIM102 (compiled only with the option)
-                        if self.eps[i] < 1.0:
-                            # over the block's packing: its rounding is water above or below the pores,
-                            # which the stabilisation is to relax (42 particles for 40 in the 10 mm plug);
-                            # water read over r_e at t = 0 (interior: on a ramp) fills its pores
-                            fill = 1.0
-                            if self.pore_read[i] == 1:
-                                fill = self.rho_pore[i] / (self.eps[i] * self.rho_w * self.packing[i])
-                            self.rest_fill_pore[i] = ti.min(ti.max(fill, 0.8), 1.25)
 
     @ti.kernel
     def _k_eddy_viscosity(self):
@@ -1351,29 +970,6 @@ class ISPHSolver(SolverCommon):
             u = u / self.eps[i]
         return u
 
-    @ti.func
-    def _shift(self, i, frac):
-        """The shifting displacement over the fraction frac of the step dt: dr = -A h |u| frac dt grad C
-        (grad C with Lind's anti-pairing term), with its component along the surface normal n = -grad C /
-        |grad C| removed for particles within the support of a free-surface particle, and capped at frac
-        shifting_max."""
-        u = self._advection_velocity(i)
-        gc = self.grad_c[i]
-        ds = -self.shift_a * self.h * u.norm() * (frac * self.dt[None]) * gc
-        near_surface = self.free[i]
-        for k in range(self.grid.nbr_count[i]):
-            j = self.grid.nbr[i, k]
-            if self.kind[j] == WATER and self.free[j] == 1:
-                near_surface = 1
-        if near_surface == 1 and gc.norm() > 0.0:
-            nrm = -gc.normalized()
-            ds -= ds.dot(nrm) * nrm
-        mag = ds.norm()
-        cap = self.shift_max * frac
-        if mag > cap:
-            ds *= cap / mag
-        return ds
-
     @ti.kernel
     def _k_advect(self, frac: float):
         """x += dt u, u = v / eps (pore) or v (Darcy); plus the shifting displacement of `_shift` over the
@@ -1386,44 +982,6 @@ class ISPHSolver(SolverCommon):
                 if ti.static(self.shifting):
                     dr += self._shift(i, frac)
                 self.x[i] += dr
-                if ti.static(self.periodic):
-                    self.x[i] = operators.wrap(self.x[i], self.period)
-
-    @ti.kernel
-    def _k_shift_number(self) -> float:
-        """The shifting's diffusion number A |u| dt / h over the water in the ground (eps < 1), largest."""
-        nu = 0.0
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.solve_mask[i] == 1 and self.eps[i] < 1.0:
-                ti.atomic_max(nu, self.shift_a * self._advection_velocity(i).norm() * self.dt[None] / self.h)
-        return nu
-
-    @ti.kernel
-    def _k_grad_c(self):
-        """grad C (with the anti-pairing term) at the particles' present positions, as `_k_density` takes
-        it at the step's start, for a shifting substep."""
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.solve_mask[i] == 1:
-                xi = self.x[i]
-                gc = ti.Vector.zero(float, self.dim)
-                w_ref = self._anti_pairing_reference(i)
-                w_wall = self._wall_anti_pairing_reference(i)
-                for k in range(self.grid.nbr_count[i]):
-                    j, rij, r = self._pair(i, k, xi)
-                    if self._present(j) and r > 0.0:
-                        gc += self._grad_c_pair(j, self._volume(j), r, kernels.grad_w(rij, r, self.h, self.dim), w_ref,
-                                                w_wall)
-                self.grad_c[i] = gc
-
-    @ti.kernel
-    def _k_shift(self, frac: float):
-        """A later shifting substep: x += the shift of `_shift` over the fraction frac of the step."""
-        ti.loop_config(serialize=self.serial)
-        for i in range(self.n):
-            if self.solve_mask[i] == 1:
-                self.x[i] += self._shift(i, frac)
                 if ti.static(self.periodic):
                     self.x[i] = operators.wrap(self.x[i], self.period)
 
