@@ -274,12 +274,12 @@ def _permeameter(setting):
       notes=lambda rows: _permeameter_spread(rows, {}))
 def _permeameter_3d(setting):
     # the 2D case's plug and column in a square column; 3D at dx 5 mm holds 19,150 water particles (65,338
-    # with the walls), so the full setting stops there (its run at dt 0.25 ms took 5.6 min on the 2-core
-    # AMD EPYC)
+    # with the walls), so the full setting stops there (its run at dt 0.25 ms took 5.6-6.2 min on the
+    # 2-core AMD EPYC)
     if setting == "small":
-        dxs, dts = (0.02, 0.01), (0.0005, 0.001)
+        dxs, dts = (0.02, 0.1 / 7, 0.01), (0.0005, 0.001)
     else:
-        dxs, dts = (0.01, 0.005), (0.00025, 0.0005, 0.001)
+        dxs, dts = (0.01, 0.1 / 13, 0.005), (0.00025, 0.0005, 0.001)
     return _permeameter_runs(dxs, dts, ["--variant", "3d"])
 
 
