@@ -16,6 +16,32 @@ from .errors import InputError
 CACHE_MAX_BYTES = 1 << 30
 
 
+#: Taichi 1.7's LLVM backends (CPU, CUDA) hold at most 512 SNode trees in one runtime, and the 513th
+#: ends the process with a segmentation fault and no message. Fields declared between two kernel launches
+#: form one tree, so a solver's construction takes several: 2-11 for the shipped configs, up to 31 with
+#: the multigrid PPE (measured 2026-11-29). A process that builds solver after solver (a notebook, a test
+#: session) runs out after some tens of them; the CLI builds one per process.
+MAX_FIELD_TREES = 512
+#: the trees a solver's construction is allowed to need: twice the most measured
+SOLVER_FIELD_TREES = 64
+
+
+def check_field_room() -> None:
+    """Raise a one-line RuntimeError where the live Taichi runtime has too few SNode trees left for
+    another solver (MAX_FIELD_TREES), instead of letting Taichi crash the process while it builds one."""
+    from taichi.lang import impl
+
+    prog = impl.get_runtime().prog
+    if prog is None:
+        return
+    used = prog.get_snode_tree_size()
+    if used + SOLVER_FIELD_TREES > MAX_FIELD_TREES:
+        raise RuntimeError(
+            f"this Taichi runtime holds {used} of its {MAX_FIELD_TREES} field trees, too few left for another "
+            f"solver ({SOLVER_FIELD_TREES}); build each case in its own process (as the CLI and sweeps do) or "
+            "call ti.reset() and ti.init() before the next one")
+
+
 def _cache_dir() -> str:
     base = os.environ.get("TAICHI_SPH_CACHE") or os.path.join(
         os.environ.get("XDG_CACHE_HOME", str(Path.home() / ".cache")), "taichi-sph")

@@ -43,8 +43,8 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
-@pytest.fixture(scope="session")
-def ti_cpu():
+def _init_cpu_runtime():
+    """This process's Taichi runtime for in-process tests: CPU, f64."""
     import taichi as ti
 
     from taichi_sph import taichi_frontend
@@ -52,7 +52,35 @@ def ti_cpu():
 
     taichi_frontend.install()
     ti.init(arch=ti.cpu, default_fp=ti.f64, random_seed=0, log_level=ti.WARN, **taichi_options())
-    yield ti
+    return ti
+
+
+@pytest.fixture(scope="session")
+def ti_cpu():
+    yield _init_cpu_runtime()
+
+
+#: a module starts on a fresh runtime where the shared one holds more SNode trees than this
+FIELD_TREES_BEFORE_RESET = 128
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _room_for_fields():
+    """Each solver built in-process takes 2-31 of the runtime's 512 SNode trees for good (taichi_sph.backend,
+    MAX_FIELD_TREES), and a worker that ran the in-process tests of several modules ran out: the next
+    solver crashed it (tests/test_switches.py alone builds 56). Where the shared runtime holds more than
+    FIELD_TREES_BEFORE_RESET, a module starts on a fresh one. At a module's start no Taichi object of
+    another module is alive: module fixtures are torn down when the next test's module differs."""
+    if "taichi" in sys.modules:
+        from taichi.lang import impl
+
+        prog = impl.get_runtime().prog
+        if prog is not None and prog.get_snode_tree_size() > FIELD_TREES_BEFORE_RESET:
+            import taichi as ti
+
+            ti.reset()
+            _init_cpu_runtime()
+    yield
 
 
 def cli_env():

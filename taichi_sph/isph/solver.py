@@ -31,7 +31,7 @@ import numpy as np
 import taichi as ti
 
 from .. import guard
-from ..backend import is_f64, on_cpu
+from ..backend import check_field_room, is_f64, on_cpu
 from ..errors import InputError, InstabilityError
 from ..linalg.ell_pcg import EllOverflowError, EllPCG
 from ..linalg.mg_pcg import MGPCG
@@ -88,6 +88,7 @@ class ISPHSolver(SurfaceTests, Shifting, GroundDensity, SolverCommon):
         return self.n_water
 
     def __init__(self, cfg, scene):
+        check_field_room()  # a clear error, not Taichi's crash, where the runtime's field trees run out
         self.cfg = cfg
         self.dim = dim = cfg.dim
         self.dx = dx = cfg.dx

@@ -42,7 +42,7 @@ import numpy as np
 import taichi as ti
 
 from .. import guard
-from ..backend import is_f64, on_cpu
+from ..backend import check_field_room, is_f64, on_cpu
 from ..contract import DT_CFL, DT_FORCE, DT_VISCOUS
 from ..scene import AIR, SOIL, WALL, WATER
 from ..sph import kernels, operators, walls
@@ -103,6 +103,7 @@ class WCSPHSolver(SolverCommon):
     proposes_dt = True
 
     def __init__(self, cfg, scene):
+        check_field_room()  # a clear error, not Taichi's crash, where the runtime's field trees run out
         self.cfg = cfg
         w = cfg.wcsph
         self.dim = dim = cfg.dim
