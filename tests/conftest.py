@@ -15,6 +15,23 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def _threads_per_worker() -> None:
+    """Under pytest-xdist every worker's Taichi runtimes (this process's and each CLI subprocess's, which
+    inherit the environment) take the worker's share of the cores, not all of them: N workers each
+    running a runtime with a thread per core oversubscribe the machine, and a parallel loop then waits
+    on threads the scheduler has parked (two of the suite's longest tests side by side on the 2-core AMD
+    EPYC, warm cache: 66 s with two threads each, 62 s with one). Taichi reads TI_CPU_MAX_NUM_THREADS
+    where ti.init is not given the count (a config's `threads`, a test's own ti.init, still decide for
+    themselves)."""
+    workers = os.environ.get("PYTEST_XDIST_WORKER_COUNT")
+    if workers:
+        share = max(1, (os.cpu_count() or 1) // max(1, int(workers)))
+        os.environ.setdefault("TI_CPU_MAX_NUM_THREADS", str(share))
+
+
+_threads_per_worker()
+
+
 @functools.lru_cache(maxsize=1)
 def cuda_available() -> bool:
     """Whether Taichi starts on CUDA here (asked in a subprocess: this process's runtime is the CPU's).
