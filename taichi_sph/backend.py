@@ -18,11 +18,11 @@ CACHE_MAX_BYTES = 1 << 30
 
 #: Taichi 1.7's LLVM backends (CPU, CUDA) hold at most 512 SNode trees in one runtime, and the 513th
 #: ends the process with a segmentation fault and no message. Fields declared between two kernel launches
-#: form one tree, so a solver's construction takes several: 2-11 for the shipped configs, up to 31 with
-#: the multigrid PPE (measured 2026-11-29). A process that builds solver after solver (a notebook, a test
-#: session) runs out after some tens of them; the CLI builds one per process.
+#: form one tree, so a solver takes several: 2-11 while the shipped configs' solvers are built, 13 with the
+#: multigrid PPE, and 3-4 more at the first step (measured 2026-11-29). A process that builds solver after
+#: solver (a notebook, a test session) runs out after some tens of them; the CLI builds one per process.
 MAX_FIELD_TREES = 512
-#: the trees a solver's construction is allowed to need: twice the most measured
+#: the trees a solver is allowed to need, built and stepped: 3.5 times the most measured (17)
 SOLVER_FIELD_TREES = 64
 
 

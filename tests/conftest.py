@@ -83,7 +83,7 @@ FIELD_TREES_BEFORE_RESET = 128
 
 @pytest.fixture(scope="module", autouse=True)
 def _room_for_fields():
-    """Each solver built in-process takes 2-31 of the runtime's 512 SNode trees for good (taichi_sph.backend,
+    """Each solver built in-process takes 2-17 of the runtime's 512 SNode trees for good (taichi_sph.backend,
     MAX_FIELD_TREES), and a worker that ran the in-process tests of several modules ran out: the next
     solver crashed it (tests/test_switches.py alone builds 56). Where the shared runtime holds more than
     FIELD_TREES_BEFORE_RESET, a module starts on a fresh one. At a module's start no Taichi object of

@@ -105,9 +105,8 @@ def test_a_runtime_without_room_for_a_solver_says_so(ti_cpu, mode, monkeypatch):
     scene = build_scene(cfg)
     used = impl.get_runtime().prog.get_snode_tree_size()
     monkeypatch.setattr(backend, "MAX_FIELD_TREES", used + backend.SOLVER_FIELD_TREES - 1)
-    before = used
     with pytest.raises(RuntimeError, match=f"holds {used} of its .* field trees.*its own process"):
         make_solver(cfg, scene)
-    assert impl.get_runtime().prog.get_snode_tree_size() == before  # nothing was declared
+    assert impl.get_runtime().prog.get_snode_tree_size() == used  # nothing was declared
     monkeypatch.setattr(backend, "MAX_FIELD_TREES", used + backend.SOLVER_FIELD_TREES)
     assert make_solver(cfg, scene).n == scene.n
