@@ -100,6 +100,18 @@ def _room_for_fields():
     yield
 
 
+def _forked_commands() -> None:
+    """The CLI runs of the tests (`cli`, and the tools and sweeps they call through
+    taichi_sph.cli_process) are forked from a server that has imported Taichi and the package once
+    (taichi_sph/cli_fork.py), not started as fresh interpreters: the suite starts ~330 of them, and
+    each skips about half a second of imports. Tests that run the entry point itself (the CLI's error
+    messages, a run interrupted by a signal) start `python -m taichi_sph.cli` with subprocess."""
+    os.environ.setdefault("TAICHI_SPH_FORK", "1")
+
+
+_forked_commands()
+
+
 def cli_env():
     env = dict(os.environ)
     env.setdefault("TI_LOG_LEVEL", "warn")
@@ -108,10 +120,12 @@ def cli_env():
 
 
 def cli(*args, timeout=900, cwd=None):
-    """Run `taichi-sph ARGS...` in a subprocess from the repository root; returns CompletedProcess."""
-    cmd = [sys.executable, "-m", "taichi_sph.cli", *map(str, args)]
-    return subprocess.run(cmd, cwd=cwd or ROOT, env=cli_env(), capture_output=True, text=True, timeout=timeout,
-                          check=False)
+    """Run `taichi-sph ARGS...` in a process of its own from the repository root (cli_process: forked
+    from the test worker's server of imported modules); returns a CompletedProcess, stdout and stderr
+    apart."""
+    from taichi_sph.cli_process import run_cli_captured
+
+    return run_cli_captured(args, env=cli_env(), cwd=cwd or ROOT, timeout=timeout)
 
 
 @pytest.fixture

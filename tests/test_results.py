@@ -16,7 +16,7 @@ import pytest
 
 from taichi_sph.io.hdf5 import RunFile, RunWriter
 
-from .conftest import ROOT, cli_env
+from .conftest import ROOT, cli, cli_env
 
 RHO, G = 1000.0, 9.81
 H, Y_PROBE = 0.30, 0.10
@@ -40,11 +40,6 @@ probes:
   - {name: volume, type: water_volume, box: {min: [0.0, 0.0], max: [0.4, 0.4]}, every: 0.01}
   - {name: flow, type: velocity, box: {min: [0.1, 0.0], max: [0.3, 0.2]}}
 """
-
-
-def cli(*args, timeout=300):
-    cmd = [sys.executable, "-m", "taichi_sph.cli", *map(str, args)]
-    return subprocess.run(cmd, check=False, cwd=ROOT, env=cli_env(), capture_output=True, text=True, timeout=timeout)
 
 
 def _can_render():

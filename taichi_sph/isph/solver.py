@@ -987,9 +987,12 @@ class ISPHSolver(SurfaceTests, Shifting, GroundDensity, SolverCommon):
                     self.x[i] = operators.wrap(self.x[i], self.period)
 
     @ti.kernel
-    def _k_diagnostics(self) -> ti.types.vector(8, float):
+    def _k_diagnostics(self) -> ti.types.vector(8, ti.f64):
         """Kinetic energy, max speed, water volume, count of non-finite values, first bad particle id,
-        number of free-surface particles, number of isolated water particles, lowest water pressure."""
+        number of free-surface particles, number of isolated water particles, lowest water pressure;
+        summed in the run's precision and returned in f64. (A return type of `float` would take the
+        precision Taichi had when this module was imported: f32 where that came before `ti.init`, as in
+        a process that imports the solvers first, so an f64 run's diagnostics were cut to f32 there.)"""
         n_isolated = 0.0
         pmin = 1.0e30  # no water: reported as 0
         ke = 0.0

@@ -1,0 +1,106 @@
+"""A `taichi-sph` command in a process forked from one that has already imported what the command needs.
+
+A fresh `python -m taichi_sph.cli` spends about half a second importing Taichi, NumPy, h5py, pydantic
+and this package before it reads its config, a quarter of a short run's start-up (docs/performance.md,
+"Start-up of a command"). `taichi_sph.cli_process` starts its commands through Python's `forkserver`
+(multiprocessing): one server process per caller imports this module once, and each command is a
+child forked from it, which runs `cli.main` as `python -m taichi_sph.cli` would. Nothing of Taichi's
+runtime exists in the server (no `ti.init`, no threads): each child starts its own, as a fresh process
+does.
+
+What a child does differently from a fresh process, and why it is the same for the command:
+
+- Its standard output and error are the files it is given (both the same file for a log), rebound at
+  the file-descriptor level, so that Taichi's C++ messages land there too; stdin is /dev/null.
+- It leaves with `os._exit` after `cli.main` returns (the exit code as a process would give it), after
+  Taichi's runtime is reset, which writes the kernels it compiled to the offline cache as the end of a
+  fresh process does, and after the `atexit` handlers have run.
+- Taichi's banner ("[Taichi] version ...") is not printed: the server imported Taichi with it off.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import io
+import os
+import sys
+import traceback
+
+_BANNER = "ENABLE_TAICHI_HEADER_PRINT"  # Taichi prints its banner at import unless this says 0
+
+_before = os.environ.get(_BANNER)
+os.environ[_BANNER] = "0"
+try:
+    import h5py  # noqa: F401
+    import numpy  # noqa: F401
+    import taichi
+
+    from . import cli, run, scene, solvers  # noqa: F401
+    from .io import hdf5  # noqa: F401
+    from .isph import solver as _isph_solver  # noqa: F401
+    from .wcsph import solver as _wcsph_solver  # noqa: F401
+finally:
+    if _before is None:
+        os.environ.pop(_BANNER, None)
+    else:
+        os.environ[_BANNER] = _before
+
+
+def _exit_code(code) -> int:
+    """The exit status Python gives `sys.exit(code)`."""
+    if code is None:
+        return 0
+    if isinstance(code, int):
+        return code & 0xFF
+    print(code, file=sys.stderr)
+    return 1
+
+
+def _rebind(fd: int, path: str, mode: int) -> None:
+    target = os.open(path, mode, 0o644)
+    os.dup2(target, fd)
+    os.close(target)
+
+
+def child_main(args: list[str], env: dict, cwd: str, out_path: str, err_path: str) -> None:
+    """Run `taichi-sph ARGS` in this (forked) process and leave with its exit code."""
+    code = 1
+    try:
+        os.chdir(cwd)
+        os.environ.clear()
+        os.environ.update(env)
+        mode = os.O_WRONLY | os.O_CREAT | os.O_TRUNC
+        _rebind(1, out_path, mode)
+        if err_path == out_path:
+            os.dup2(1, 2)
+        else:
+            _rebind(2, err_path, mode)
+        encoding = sys.stdout.encoding if sys.stdout is not None else "utf-8"
+        sys.stdout = io.TextIOWrapper(io.FileIO(1, "w", closefd=False), encoding=encoding)
+        sys.stderr = io.TextIOWrapper(io.FileIO(2, "w", closefd=False), encoding=encoding,
+                                      errors="backslashreplace", line_buffering=True)
+        sys.argv = [cli.__file__, *args]
+        try:
+            code = _exit_code(cli.main(args))
+        except SystemExit as exc:
+            code = _exit_code(exc.code)
+        except BaseException:  # noqa: BLE001 - as an uncaught exception ends a process: traceback, status 1
+            traceback.print_exc()
+            code = 1
+        _finish_taichi()
+        atexit._run_exitfuncs()
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):  # a closed or broken stream: nothing more to say
+                stream.flush()
+        os._exit(code)
+
+
+def _finish_taichi() -> None:
+    """Reset Taichi's runtime where one was started: that writes its newly compiled kernels to the
+    offline cache (a fresh process does it when its runtime is destroyed at exit)."""
+    from taichi.lang import impl
+
+    if impl.get_runtime().prog is not None:
+        taichi.reset()
