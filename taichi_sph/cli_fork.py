@@ -14,8 +14,11 @@ What a child does differently from a fresh process, and why it is the same for t
   the file-descriptor level, so that Taichi's C++ messages land there too; stdin is /dev/null.
 - It leaves with `os._exit` after `cli.main` returns (the exit code as a process would give it), after
   Taichi's runtime is reset, which writes the kernels it compiled to the offline cache as the end of a
-  fresh process does, and after the `atexit` handlers have run.
+  fresh process does, and after its threads that are not daemons have ended and the `atexit` handlers
+  have run.
 - Taichi's banner ("[Taichi] version ...") is not printed: the server imported Taichi with it off.
+- Its modules are those the server imported when it started: source changed on disk after that
+  reaches a forked command only from a new server (a new calling process).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import contextlib
 import io
 import os
 import sys
+import threading
 import traceback
 
 _BANNER = "ENABLE_TAICHI_HEADER_PRINT"  # Taichi prints its banner at import unless this says 0
@@ -88,6 +92,7 @@ def child_main(args: list[str], env: dict, cwd: str, out_path: str, err_path: st
         except BaseException:  # noqa: BLE001 - as an uncaught exception ends a process: traceback, status 1
             traceback.print_exc()
             code = 1
+        _join_threads()
         _finish_taichi()
         atexit._run_exitfuncs()
     finally:
@@ -95,6 +100,13 @@ def child_main(args: list[str], env: dict, cwd: str, out_path: str, err_path: st
             with contextlib.suppress(Exception):  # a closed or broken stream: nothing more to say
                 stream.flush()
         os._exit(code)
+
+
+def _join_threads() -> None:
+    """Wait for the threads that are not daemons, as a process's end does before it exits."""
+    for thread in threading.enumerate():
+        if thread is not threading.current_thread() and not thread.daemon:
+            thread.join()
 
 
 def _finish_taichi() -> None:

@@ -49,6 +49,11 @@ class CliRun:
         return self.failure_line().removeprefix(PREFIX)
 
 
+#: the forkserver context once made (False where the platform has none); guarded by the lock
+_CONTEXT = None
+_CONTEXT_LOCK = threading.Lock()
+
+
 def _fork_context():
     """The forkserver context whose children start with the CLI's modules imported, or None where
     commands start as fresh processes (see the module's docstring)."""
@@ -64,10 +69,6 @@ def _fork_context():
                 ctx.set_forkserver_preload(["taichi_sph.cli_fork"])
                 _CONTEXT = ctx
     return _CONTEXT or None
-
-
-_CONTEXT = None
-_CONTEXT_LOCK = threading.Lock()
 
 
 def run_to_files(args, out_path, err_path, *, env: dict | None = None, cwd: str | Path | None = None,
