@@ -11,7 +11,8 @@ does.
 What a child does differently from a fresh process, and why it is the same for the command:
 
 - Its standard output and error are the files it is given (both the same file for a log), rebound at
-  the file-descriptor level, so that Taichi's C++ messages land there too; stdin is /dev/null.
+  the file-descriptor level, so that Taichi's C++ messages land there too (cli_fork_launch.py); stdin
+  is /dev/null.
 - It leaves with `os._exit` after `cli.main` returns (the exit code as a process would give it), after
   Taichi's runtime is reset, which writes the kernels it compiled to the offline cache as the end of a
   fresh process does, and after its threads that are not daemons have ended and the `atexit` handlers
@@ -24,8 +25,6 @@ What a child does differently from a fresh process, and why it is the same for t
 from __future__ import annotations
 
 import atexit
-import contextlib
-import io
 import os
 import sys
 import threading
@@ -61,45 +60,21 @@ def _exit_code(code) -> int:
     return 1
 
 
-def _rebind(fd: int, path: str, mode: int) -> None:
-    target = os.open(path, mode, 0o644)
-    os.dup2(target, fd)
-    os.close(target)
-
-
-def child_main(args: list[str], env: dict, cwd: str, out_path: str, err_path: str) -> None:
-    """Run `taichi-sph ARGS` in this (forked) process and leave with its exit code."""
-    code = 1
+def run_command(args: list[str]) -> int:
+    """Run `taichi-sph ARGS` in this (forked) process, its output already where it belongs, and end what a
+    process's exit would end (its threads, Taichi's runtime, the atexit handlers); returns the exit code."""
+    sys.argv = [cli.__file__, *args]
     try:
-        os.chdir(cwd)
-        os.environ.clear()
-        os.environ.update(env)
-        mode = os.O_WRONLY | os.O_CREAT | os.O_TRUNC
-        _rebind(1, out_path, mode)
-        if err_path == out_path:
-            os.dup2(1, 2)
-        else:
-            _rebind(2, err_path, mode)
-        encoding = sys.stdout.encoding if sys.stdout is not None else "utf-8"
-        sys.stdout = io.TextIOWrapper(io.FileIO(1, "w", closefd=False), encoding=encoding)
-        sys.stderr = io.TextIOWrapper(io.FileIO(2, "w", closefd=False), encoding=encoding,
-                                      errors="backslashreplace", line_buffering=True)
-        sys.argv = [cli.__file__, *args]
-        try:
-            code = _exit_code(cli.main(args))
-        except SystemExit as exc:
-            code = _exit_code(exc.code)
-        except BaseException:  # noqa: BLE001 - as an uncaught exception ends a process: traceback, status 1
-            traceback.print_exc()
-            code = 1
-        _join_threads()
-        _finish_taichi()
-        atexit._run_exitfuncs()
-    finally:
-        for stream in (sys.stdout, sys.stderr):
-            with contextlib.suppress(Exception):  # a closed or broken stream: nothing more to say
-                stream.flush()
-        os._exit(code)
+        code = _exit_code(cli.main(args))
+    except SystemExit as exc:
+        code = _exit_code(exc.code)
+    except BaseException:  # noqa: BLE001 - as an uncaught exception ends a process: traceback, status 1
+        traceback.print_exc()
+        code = 1
+    _join_threads()
+    _finish_taichi()
+    atexit._run_exitfuncs()
+    return code
 
 
 def _join_threads() -> None:

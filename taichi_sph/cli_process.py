@@ -66,7 +66,7 @@ def _fork_context():
                 _CONTEXT = False
             else:
                 ctx = multiprocessing.get_context("forkserver")
-                ctx.set_forkserver_preload(["taichi_sph.cli_fork"])
+                ctx.set_forkserver_preload(["taichi_sph.cli_fork", "taichi_sph.cli_fork_launch"])
                 _CONTEXT = ctx
     return _CONTEXT or None
 
@@ -77,16 +77,17 @@ def run_to_files(args, out_path, err_path, *, env: dict | None = None, cwd: str 
     `err_path` (the same path for both: one file, in the order written). Returns the exit code
     (negative: killed by that signal), None when `timeout` (s) stopped it (it is killed)."""
     env = dict(os.environ if env is None else env)
-    cwd = str(cwd) if cwd is not None else os.getcwd()
+    cwd = os.path.abspath(cwd) if cwd is not None else os.getcwd()
     args = [str(a) for a in args]
+    out_path, err_path = os.path.abspath(out_path), os.path.abspath(err_path)
     ctx = _fork_context()
     if ctx is not None:
         from . import cli_fork_launch
 
-        return cli_fork_launch.run(ctx, args, env, cwd, str(out_path), str(err_path), timeout)
+        return cli_fork_launch.run(ctx, args, env, cwd, out_path, err_path, timeout)
     cmd = [sys.executable, "-m", "taichi_sph.cli", *args]
     with open(out_path, "w", encoding="utf-8") as out:
-        err = out if str(err_path) == str(out_path) else open(err_path, "w", encoding="utf-8")  # noqa: SIM115
+        err = out if err_path == out_path else open(err_path, "w", encoding="utf-8")  # noqa: SIM115
         try:
             return subprocess.run(cmd, stdout=out, stderr=err if err is not out else subprocess.STDOUT, env=env,
                                   cwd=cwd, timeout=timeout, check=False).returncode
@@ -98,7 +99,11 @@ def run_to_files(args, out_path, err_path, *, env: dict | None = None, cwd: str 
 
 
 def _read(path) -> str:
-    return Path(path).read_text(encoding="utf-8", errors="replace")
+    """The text of an output file; "" where the process never made it (killed before it started)."""
+    try:
+        return Path(path).read_text(encoding="utf-8", errors="replace")
+    except FileNotFoundError:
+        return ""
 
 
 def run_cli(args, *, log_path: str | Path | None = None, env: dict | None = None, cwd: str | Path | None = None,
