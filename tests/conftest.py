@@ -103,9 +103,10 @@ def _room_for_fields():
 def _forked_commands() -> None:
     """The CLI runs of the tests (`cli`, and the tools and sweeps they call through
     taichi_sph.cli_process) are forked from a server that has imported Taichi and the package once
-    (taichi_sph/cli_fork.py), not started as fresh interpreters: the suite starts ~330 of them, and
-    each skips about half a second of imports. Tests that run the entry point itself (the CLI's error
-    messages, a run interrupted by a signal) start `python -m taichi_sph.cli` with subprocess."""
+    (taichi_sph/cli_fork.py), not started as fresh interpreters: the suite starts about 300 of them,
+    and each skips about half a second of imports (tests/test_cli_process.py checks that both ways
+    write the same run). A run interrupted by a signal, the `schema` and `sweep` commands and
+    rendering without a display start `python -m taichi_sph.cli` with subprocess themselves."""
     os.environ.setdefault("TAICHI_SPH_FORK", "1")
 
 
