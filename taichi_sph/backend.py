@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 
@@ -24,6 +25,25 @@ CACHE_MAX_BYTES = 1 << 30
 MAX_FIELD_TREES = 512
 #: the trees a solver is allowed to need, built and stepped: 3.5 times the most measured (17)
 SOLVER_FIELD_TREES = 64
+
+
+#: Taichi prints its banner on stdout when first imported unless this variable says 0
+_TAICHI_BANNER = "ENABLE_TAICHI_HEADER_PRINT"
+
+
+@contextlib.contextmanager
+def no_taichi_banner():
+    """Within: a first import of Taichi prints no banner on stdout (`info --json` prints nothing but JSON;
+    the server of forked commands imports Taichi for them). The variable is restored afterwards."""
+    before = os.environ.get(_TAICHI_BANNER)
+    os.environ[_TAICHI_BANNER] = "0"
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(_TAICHI_BANNER, None)
+        else:
+            os.environ[_TAICHI_BANNER] = before
 
 
 def check_field_room() -> None:

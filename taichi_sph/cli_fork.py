@@ -25,16 +25,13 @@ What a child does differently from a fresh process, and why it is the same for t
 from __future__ import annotations
 
 import atexit
-import os
 import sys
 import threading
 import traceback
 
-_BANNER = "ENABLE_TAICHI_HEADER_PRINT"  # Taichi prints its banner at import unless this says 0
+from .backend import no_taichi_banner
 
-_before = os.environ.get(_BANNER)
-os.environ[_BANNER] = "0"
-try:
+with no_taichi_banner():
     import h5py  # noqa: F401
     import numpy  # noqa: F401
     import taichi
@@ -43,11 +40,6 @@ try:
     from .io import hdf5  # noqa: F401
     from .isph import solver as _isph_solver  # noqa: F401
     from .wcsph import solver as _wcsph_solver  # noqa: F401
-finally:
-    if _before is None:
-        os.environ.pop(_BANNER, None)
-    else:
-        os.environ[_BANNER] = _before
 
 
 def _exit_code(code) -> int:

@@ -3,27 +3,15 @@ switches come from taichi_sph/switches.py, the record the solvers set their comp
 
 from __future__ import annotations
 
-import os
-
-from .backend import resolved_precision
+from .backend import no_taichi_banner, resolved_precision
 from .switches import Switches
-
-#: Taichi prints its banner on stdout when first imported unless this variable says 0
-_TAICHI_BANNER = "ENABLE_TAICHI_HEADER_PRINT"
 
 
 def build_scene_quietly(cfg):
     """The config's scene (scene.build_scene) without Taichi's banner on stdout: scene.py imports
     Taichi through its kernels, and `info --json` prints nothing but JSON."""
-    before = os.environ.get(_TAICHI_BANNER)
-    os.environ[_TAICHI_BANNER] = "0"
-    try:
+    with no_taichi_banner():
         from .scene import build_scene
-    finally:
-        if before is None:
-            os.environ.pop(_TAICHI_BANNER, None)
-        else:
-            os.environ[_TAICHI_BANNER] = before
     return build_scene(cfg)
 
 
