@@ -46,20 +46,31 @@ def no_taichi_banner():
             os.environ[_TAICHI_BANNER] = before
 
 
-def check_field_room() -> None:
-    """Raise a one-line RuntimeError where the live Taichi runtime has too few SNode trees left for
-    another solver (MAX_FIELD_TREES), instead of letting Taichi crash the process while it builds one."""
+def field_trees_used() -> int | None:
+    """SNode trees the live Taichi runtime holds (MAX_FIELD_TREES), None where none is started."""
     from taichi.lang import impl
 
     prog = impl.get_runtime().prog
-    if prog is None:
+    return None if prog is None else prog.get_snode_tree_size()
+
+
+def check_field_room() -> None:
+    """Raise a one-line RuntimeError where the live Taichi runtime has too few SNode trees left for
+    another solver (MAX_FIELD_TREES), instead of letting Taichi crash the process while it builds one."""
+    used = field_trees_used()
+    if used is None:
         return
-    used = prog.get_snode_tree_size()
     if used + SOLVER_FIELD_TREES > MAX_FIELD_TREES:
         raise RuntimeError(
             f"this Taichi runtime holds {used} of its {MAX_FIELD_TREES} field trees, too few left for another "
             f"solver ({SOLVER_FIELD_TREES}); build each case in its own process (as the CLI and sweeps do) or "
             "call ti.reset() and ti.init() before the next one")
+
+
+def cpu_threads_per_worker(workers: int) -> int:
+    """CPU threads for each of `workers` processes running at once: their share of the cores, at least 1
+    (more would oversubscribe the machine, and a parallel loop then waits on parked threads)."""
+    return max(1, (os.cpu_count() or 1) // max(1, int(workers)))
 
 
 def _cache_dir() -> str:

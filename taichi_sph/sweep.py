@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .backend import cpu_threads_per_worker
 from .errors import InputError
 
 log = logging.getLogger("taichi_sph")
@@ -257,7 +258,7 @@ def _finished(run_path: str, config_yaml: str) -> bool:
 
 
 def _run_local(specs, workers: int):
-    threads = max(1, (os.cpu_count() or 1) // max(1, workers))
+    threads = cpu_threads_per_worker(workers)
     with _cf.ThreadPoolExecutor(max_workers=workers) as pool:
         futures = [pool.submit(run_case, spec, threads) for spec in specs]
         for fut in _cf.as_completed(futures):

@@ -25,8 +25,9 @@ def _threads_per_worker() -> None:
     themselves)."""
     workers = os.environ.get("PYTEST_XDIST_WORKER_COUNT")
     if workers:
-        share = max(1, (os.cpu_count() or 1) // max(1, int(workers)))
-        os.environ.setdefault("TI_CPU_MAX_NUM_THREADS", str(share))
+        from taichi_sph.backend import cpu_threads_per_worker
+
+        os.environ.setdefault("TI_CPU_MAX_NUM_THREADS", str(cpu_threads_per_worker(int(workers))))
 
 
 _threads_per_worker()
@@ -89,10 +90,9 @@ def _room_for_fields():
     FIELD_TREES_BEFORE_RESET, a module starts on a fresh one. At a module's start no Taichi object of
     another module is alive: module fixtures are torn down when the next test's module differs."""
     if "taichi" in sys.modules:
-        from taichi.lang import impl
+        from taichi_sph.backend import field_trees_used
 
-        prog = impl.get_runtime().prog
-        if prog is not None and prog.get_snode_tree_size() > FIELD_TREES_BEFORE_RESET:
+        if (field_trees_used() or 0) > FIELD_TREES_BEFORE_RESET:
             import taichi as ti
 
             ti.reset()

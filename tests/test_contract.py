@@ -96,17 +96,15 @@ def test_a_runtime_without_room_for_a_solver_says_so(ti_cpu, mode, monkeypatch):
     message, on the next one (a process that had built 46 porous solvers). A solver is not started
     where fewer than SOLVER_FIELD_TREES are left: here the limit is moved to just above the trees this
     runtime already holds, and the error names the count and the way out."""
-    from taichi.lang import impl
-
     from taichi_sph import backend
     from taichi_sph.scene import build_scene
 
     cfg = load_config(data={**TANK, "mode": mode})
     scene = build_scene(cfg)
-    used = impl.get_runtime().prog.get_snode_tree_size()
+    used = backend.field_trees_used()
     monkeypatch.setattr(backend, "MAX_FIELD_TREES", used + backend.SOLVER_FIELD_TREES - 1)
     with pytest.raises(RuntimeError, match=f"holds {used} of its .* field trees.*its own process"):
         make_solver(cfg, scene)
-    assert impl.get_runtime().prog.get_snode_tree_size() == used  # nothing was declared
+    assert backend.field_trees_used() == used  # nothing was declared
     monkeypatch.setattr(backend, "MAX_FIELD_TREES", used + backend.SOLVER_FIELD_TREES)
     assert make_solver(cfg, scene).n == scene.n
