@@ -12,6 +12,7 @@ own, as a Dask worker), a command is a fresh `python -m taichi_sph.cli`."""
 
 from __future__ import annotations
 
+import errno
 import multiprocessing
 import os
 import subprocess
@@ -75,9 +76,12 @@ def run_to_files(args, out_path, err_path, *, env: dict | None = None, cwd: str 
                  timeout: float | None = None) -> int | None:
     """Run `taichi-sph ARGS...` with its standard output in `out_path` and its standard error in
     `err_path` (the same path for both: one file, in the order written). Returns the exit code
-    (negative: killed by that signal), None when `timeout` (s) stopped it (it is killed)."""
+    (negative: killed by that signal), None when `timeout` (s) stopped it (it is killed). A `cwd` that
+    is not a directory raises FileNotFoundError before anything starts, forked or fresh."""
     env = dict(os.environ if env is None else env)
     cwd = os.path.abspath(cwd) if cwd is not None else os.getcwd()
+    if not os.path.isdir(cwd):
+        raise FileNotFoundError(errno.ENOENT, "no such directory to run taichi-sph in", cwd)
     args = [str(a) for a in args]
     out_path, err_path = os.path.abspath(out_path), os.path.abspath(err_path)
     ctx = _fork_context()

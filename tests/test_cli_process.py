@@ -1,6 +1,7 @@
 """A command forked from the server of imported modules (taichi_sph/cli_fork.py, TAICHI_SPH_FORK=1, which
 the test suite's runs take) against the same command as a fresh `python -m taichi_sph.cli`: the run files
-bit for bit, the offline cache written, the exit code and message of bad input, a time-out."""
+bit for bit, the offline cache written, the exit code and message of bad input, a time-out, a working
+directory that does not exist."""
 
 import subprocess
 
@@ -70,3 +71,6 @@ def test_bad_input_and_time_out_alike_forked_or_fresh(tmp_path, monkeypatch, for
     assert res.rc == -1 and res.failure_line() == "taichi-sph: timed out after 2 s", res.output[-300:]
     with pytest.raises(subprocess.TimeoutExpired):
         run_cli_captured(long_run, env=cli_env(), cwd=ROOT, timeout=2)
+    # a working directory that does not exist: the same error before anything starts, forked or fresh
+    with pytest.raises(FileNotFoundError, match="no such directory"):
+        run_cli_captured(["--config", "configs/hydrostatic.yaml"], env=cli_env(), cwd=tmp_path / "absent")
