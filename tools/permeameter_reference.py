@@ -21,7 +21,7 @@ import numpy as np
 import yaml
 
 from taichi_sph.io.hdf5 import RunFile
-from taichi_sph.isph.porosity import column_level, falling_head_level
+from taichi_sph.isph.porosity import column_level, falling_head_deviation
 
 
 def simulated_level(rf, plug_top):
@@ -43,11 +43,7 @@ def compare(path):
         reg = cfg["soil"]["regions"][0]
         lo, hi = reg["min"][-1], reg["max"][-1]
         h = simulated_level(rf, hi)
-        ref, ref_i = (
-            np.array([float(sol(t)) for t in rf.times])
-            for sol in (falling_head_level(h[0], hi - lo, reg["eps0"], reg["d50"], t_end=rf.times[-1], inertia=k)
-                        for k in (False, True))
-        )
+        fh = falling_head_deviation(rf.times, h, hi - lo, reg["eps0"], reg["d50"])
         core = (lo + 2.4 * rf.dx, hi - 2.4 * rf.dx)  # the plug away from its top and bottom faces
         # the core's pore volume: its height times the tank's cross-section (the plug fills the tank)
         pores = reg["eps0"] * (core[1] - core[0]) * float(np.prod(cfg["tank"]["size"][:-1]))
@@ -62,7 +58,7 @@ def compare(path):
             fill.append(sel.sum() * rf.dx ** rf.dim / pores)
             vd.append(float(-f["velocity"][sel][:, -1].mean()) if sel.any() else float("nan"))
         share = np.array(share) if share else None
-        return rf.times, h, ref, ref_i, ref >= 0.5 * h[0], share, np.array(fill), np.array(vd)
+        return rf.times, h, fh.ref_quasi, fh.ref, fh.first_half, share, np.array(fill), np.array(vd)
 
 
 def main(paths):

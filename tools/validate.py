@@ -297,7 +297,7 @@ def _permeameter_runs(dxs, dts, args):
         import yaml
 
         from taichi_sph.io.hdf5 import RunFile
-        from taichi_sph.isph.porosity import column_level, falling_head_level
+        from taichi_sph.isph.porosity import column_level, falling_head_deviation
 
         lo, hi, eps0, d50 = PERMEAMETER_PLUG
         with RunFile(path) as rf:
@@ -313,13 +313,9 @@ def _permeameter_runs(dxs, dts, args):
             plan = float(np.prod(yaml.safe_load(rf.config_yaml)["tank"]["size"][:-1]))  # the plug fills the tank
             bulk = plan * (hi - lo - 4.8 * rf.dx)
             fill = np.array([np.sum(rf.dx**rf.dim / f["porosity"][c]) / bulk for f, c in zip(frames, core)])
-        ode = falling_head_level(h[0], hi - lo, eps0, d50, t_end=t[-1], inertia=True)
-        quasi = falling_head_level(h[0], hi - lo, eps0, d50, t_end=t[-1])
-        ref = np.array([ode(ti) for ti in t])
-        ref_q = np.array([quasi(ti) for ti in t])
-        half = ref_q >= 0.5 * h[0]
-        dev = h[half] / ref[half] - 1.0
-        dev_q = h[half] / ref_q[half] - 1.0
+        fh = falling_head_deviation(t, h, hi - lo, eps0, d50)
+        half = fh.first_half
+        dev, dev_q = fh.deviation[half], fh.deviation_quasi[half]
         worst = float(dev[np.argmax(np.abs(dev))])
         late = t >= 0.1
         return {"error": abs(worst), "largest deviation": worst,

@@ -8,6 +8,8 @@ layered ground (armour over core) works. Markers never move: they are binned and
 once, at construction; each step only the sums over the markers near each particle are taken.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 import taichi as ti
 
@@ -83,6 +85,29 @@ def falling_head_level(h0, length, eps, d50, t_end, nu=1.0e-6, g=9.81, alpha_c=1
 
     sol = solve_ivp(rhs_inertial, (0.0, t_end), [h0, 0.0], dense_output=True, rtol=1e-10, atol=1e-12).sol
     return lambda t: sol(t)[0]
+
+
+class FallingHead(NamedTuple):
+    """A permeameter's level against the falling-head references (falling_head_deviation)."""
+
+    ref: np.ndarray  # the ODE with inertia at the frames' times (m)
+    ref_quasi: np.ndarray  # the quasi-steady ODE (m)
+    deviation: np.ndarray  # h / ref - 1
+    deviation_quasi: np.ndarray  # h / ref_quasi - 1
+    first_half: np.ndarray  # frames where the quasi-steady level is still above h0 / 2
+
+
+def falling_head_deviation(times, h, length, eps, d50) -> FallingHead:
+    """A falling-head permeameter's level h at `times` (h[0] at t = 0; column_level) against the ODE with
+    inertia and the quasi-steady one (falling_head_level, both from h[0]), and the first half of the
+    drain, the frames over which docs/validation.md takes the largest deviation."""
+    t = np.asarray(times, dtype=float)
+    h = np.asarray(h, dtype=float)
+    ode = falling_head_level(h[0], length, eps, d50, t_end=t[-1], inertia=True)
+    quasi = falling_head_level(h[0], length, eps, d50, t_end=t[-1])
+    ref = np.array([ode(ti) for ti in t])
+    ref_q = np.array([quasi(ti) for ti in t])
+    return FallingHead(ref, ref_q, h / ref - 1.0, h / ref_q - 1.0, ref_q >= 0.5 * h[0])
 
 
 def penetration_front(h0, depth, eps, d50, t_end=5.0, nu=1.0e-6, g=9.81, alpha_c=1000.0, beta_c=1.1):
