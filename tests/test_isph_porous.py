@@ -150,9 +150,10 @@ def test_darcy_column_terminal_velocity(run_cli, tmp_path, dt):
     g H = 1324 Pa at its bottom). Before the shift's anti-pairing took a wall pair at the pore water's
     rest distance from the wall (docs/isph.md, "The shift's anti-pairing at walls in the ground"), it
     pushed the columns off the slip walls: +0.09 / -0.01 %, spread 1.35 / 1.75 %, pressure up to +28.7
-    / +57.0 Pa. Bounds: the core's vD 2 % (the acceptance value; the implicit drag makes the steady
-    state exact up to the SPH gradient of the uniform surface pressure), its spread 1 %, the pressure
-    20 Pa (1.5 % of rho_w g H; the measured 17 Pa grows as the step falls, through eq 31's alpha / dt^2)."""
+    / +57.0 Pa. Bounds: the core's vD 0.1 %, three times the larger measured (the acceptance value is
+    2 %; the implicit drag makes the steady state exact up to the SPH gradient of the uniform surface
+    pressure), its spread 1 %, the pressure 20 Pa (1.5 % of rho_w g H; the measured 17 Pa grows as the
+    step falls, through eq 31's alpha / dt^2)."""
     from taichi_sph.isph.porosity import terminal_darcy_velocity
 
     out = tmp_path / "dc.h5"
@@ -165,7 +166,7 @@ def test_darcy_column_terminal_velocity(run_cli, tmp_path, dt):
         z = f["position"][w][:, -1]
         core = (z > np.percentile(z, 20)) & (z < np.percentile(z, 80))
         vz = -f["velocity"][w][core, -1]
-        assert abs(vz.mean() / vt - 1) < 0.02, vz.mean() / vt - 1
+        assert abs(vz.mean() / vt - 1) < 0.001, vz.mean() / vt - 1
         assert vz.std() / vt < 0.01, vz.std() / vt
         assert np.all(np.abs(f["porosity"][w] - 0.4) < 1e-3)
         dp = np.array([rf.frame(i)["pressure"][w] - 0.5 * 1000.0 * 9.81 * rf.dx for i in range(1, rf.n_frames)])
@@ -174,16 +175,20 @@ def test_darcy_column_terminal_velocity(run_cli, tmp_path, dt):
     assert np.max(np.abs(dp)) < 20.0, (dp.min(), dp.max())
 
 
-def test_still_water_over_fine_sand(run_cli, tmp_path):
+@pytest.mark.parametrize("dt", [0.001, 0.0005])
+def test_still_water_over_fine_sand(run_cli, tmp_path, dt):
     """10 cm of saturated fine sand (D50 0.1 mm, eps0 0.3: D ~ 2000 at dt 1 ms) under 10 cm of free
-    water stays at rest with hydrostatic pressure. Measured (2D, dx 1 cm, 0.3 s): pressure of the
-    bottom row within 0.01 % of rho g (H - z), max speed 6.5e-4 m/s (4.6e-4 sqrt(g H)) at 15 ms and
-    falling (1.1e-4 m/s at 0.3 s), water volume -0.02 %. Bounds: pressure 2 % (the acceptance value), max speed 1 % of
-    sqrt(g H) (the free-water hydrostatic bound), volume 0.5 %. Before gravity entered the PPE through
-    its potential, the water above the sand fell freely and the sand's pressure was 2.4 rho g H."""
+    water stays at rest with hydrostatic pressure, at dt 1 and 0.5 ms (the drag number D = 1 + c (a + b
+    |v|) follows the step). Measured (2D, dx 1 cm, 0.3 s) at dt 1 / 0.5 ms: pressure of the bottom row
+    within 3.4e-6 / 1.4e-5 of rho g (H - z), max speed 4.3e-4 / 8.5e-4 sqrt(g H) (early, then falling; at
+    dt 1 ms 6.5e-4 m/s at 15 ms, 1.1e-4 m/s at 0.3 s), water volume -0.024 / -0.026 %. Bounds: pressure
+    5e-5 (the acceptance value is 2 %), max speed 2e-3 sqrt(g H) (the free-water hydrostatic bound is 1e-2;
+    the start-up transient doubles as the step halves, eq 31's alpha / dt^2), volume 0.1 %. Before gravity
+    entered the PPE through its potential, the water above the sand fell freely and the sand's pressure
+    was 2.4 rho g H."""
     cfg = tmp_path / "sand.yaml"
     cfg.write_text(
-        "mode: isph\ndim: 2\ndx: 0.01\nend_time: 0.3\ndt: 0.001\n"
+        f"mode: isph\ndim: 2\ndx: 0.01\nend_time: 0.3\ndt: {dt}\n"
         "output: {path: sand.h5, every: 0.05}\ntank: {size: [0.2, 0.3]}\n"
         "water:\n  - {min: [0.0, 0.0], max: [0.2, 0.1], porosity: 0.3}\n  - {min: [0.0, 0.1], max: [0.2, 0.2]}\n"
         "soil:\n  regions:\n    - {min: [0.0, 0.0], max: [0.2, 0.1], eps0: 0.3, d50: 0.0001}\n")
@@ -198,10 +203,14 @@ def test_still_water_over_fine_sand(run_cli, tmp_path):
         H = top
         bottom = pos[:, 1] < pos[:, 1].min() + 1e-6
         hydro = 1000.0 * G * (top - pos[bottom, 1])
-        assert np.max(np.abs(p[bottom] / hydro - 1)) < 0.02
         d = rf.diagnostics()
-        assert np.max(d["max_speed"]) < 0.01 * np.sqrt(G * H)
-        assert abs(d["water_volume"][-1] / d["water_volume"][0] - 1) < 0.005
+        dp = np.max(np.abs(p[bottom] / hydro - 1))
+        speed = np.max(d["max_speed"]) / np.sqrt(G * H)
+        dvol = d["water_volume"][-1] / d["water_volume"][0] - 1
+    print(f"fine sand, dt {dt}: bottom pressure {dp:.2e}, max speed {speed:.2e} sqrt(gH), volume {dvol:+.4%}")
+    assert dp < 5e-5, dp
+    assert speed < 2e-3, speed
+    assert abs(dvol) < 1e-3, dvol
 
 
 @pytest.fixture(scope="module")

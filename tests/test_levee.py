@@ -26,10 +26,11 @@ def test_two_stage_column(run_cli, tmp_path, soil_column_run):
     """configs/soil_column.yaml (saturated, 0.30 m): stage 1 the geostatic stage (K0 start, damping
     20 1/s, 0.2 s), stage 2 starts from its last frame (`wcsph.soil.start_from`) without damping for
     0.1 s. Stage 2's start must carry stage 1's end state exactly (positions, stress, plastic strain), with
-    sigma'_v within 5 % of (gamma_sat - gamma_w) z (the acceptance number; measured mean 1.002, range
-    0.997-1.012 below 0.1 m depth, the top rows carry a kernel-truncation error; with eq 36 at c0 and no
-    density diffusion, the defaults before: 1.004, 0.999-1.015), and the undamped second stage must settle
-    less than 0.5 % of H (measured 9e-7 H; 8e-7 H)."""
+    sigma'_v near (gamma_sat - gamma_w) z (measured mean 1.002, range 0.997-1.012 below 0.1 m depth, the
+    top rows carry a kernel-truncation error; with eq 36 at c0 and no density diffusion, the defaults
+    before: 1.004, 0.999-1.015; bounds 1 % on the mean and 3 % for any particle, the acceptance number
+    being 5 %), and the undamped second stage must hardly settle (measured 8.7e-7 H, 1.3e-5 H over both
+    stages; bounds 5e-6 H and 5e-5 H, the acceptance number being 0.5 % of H)."""
     (s1, r), s2 = soil_column_run, tmp_path / "s2.h5"
     assert r.returncode == 0, r.stderr
     r = run_cli("--config", "configs/soil_column.yaml", "--set", f"wcsph.soil.start_from.run={s1}",
@@ -45,10 +46,10 @@ def test_two_stage_column(run_cli, tmp_path, soil_column_run):
     depth = H - y0
     deep = depth > 0.1
     ratio = sig2[deep, 1, 1] / ((1 - N0) * (RHO_S - RHO_W) * G * depth[deep])
-    assert abs(ratio.mean() - 1) < 0.05 and np.abs(ratio - 1).max() < 0.1, (ratio.mean(), ratio.min(), ratio.max())
+    assert abs(ratio.mean() - 1) < 0.01 and np.abs(ratio - 1).max() < 0.03, (ratio.mean(), ratio.min(), ratio.max())
     x_end, *_ = _soil_frame(s2, -1)
-    assert np.abs(x2[:, 1] - x_end[:, 1]).max() / H < 0.005
-    assert np.abs(y0 - x_end[:, 1]).max() / H < 0.005  # and over both stages
+    assert np.abs(x2[:, 1] - x_end[:, 1]).max() / H < 5e-6
+    assert np.abs(y0 - x_end[:, 1]).max() / H < 5e-5  # and over both stages
 
 
 def test_start_from_errors(run_cli, tmp_path):
