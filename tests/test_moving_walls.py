@@ -67,10 +67,11 @@ def test_stokes_second_problem(run_cli, tmp_path, variant):
     """The plate oscillates along its face, x = A sin(2 pi t / T) with A = U T / (2 pi) (U 0.05 m/s,
     T 0.05 s, layer sqrt(2 nu / omega) = 4 mm = 4 dx), from rest at t = 0, for two periods. Against the
     exact start-up solution (Duhamel's integral), measured over the 20 frames: worst rms error 0.0019 U
-    (isph) and 0.0049 U (wcsph_biot), largest single-particle error 0.011 U / 0.021 U. Bounds: rms
-    0.02 U and any particle 0.05 U (about four and two times the larger measured); a plate moving a
-    quarter period out of phase leaves an rms error near 0.3 U. The plate's particles follow
-    x0 + A sin(2 pi t / T) to rounding."""
+    (isph) and 0.0049 U (wcsph_biot), largest single-particle error 0.011 U / 0.021 U. Bounds, each mode
+    its own, about two and a half times its measured: rms 0.005 U / 0.012 U, any particle 0.025 U /
+    0.05 U; a plate moving a quarter period out of phase leaves an rms error near 0.3 U. The plate's
+    particles follow x0 + A sin(2 pi t / T) to rounding."""
+    rms_bound, max_bound = (0.005, 0.025) if variant == "oscillating" else (0.012, 0.05)
     out = tmp_path / "osc.h5"
     r = run_cli("--config", CONFIG, "--variant", variant, "--out", out, "--no-progress")
     assert r.returncode == 0, r.stderr
@@ -85,8 +86,8 @@ def test_stokes_second_problem(run_cli, tmp_path, variant):
             f, t = rf.frame(i), float(rf.times[i])
             y = f["position"][water][:, 1] - FACE
             err = f["velocity"][water][:, 0] - _oscillating_plate_exact(y, t, period)
-            assert np.sqrt(np.mean(err**2)) < 0.02 * U, (t, np.sqrt(np.mean(err**2)) / U)
-            assert np.abs(err).max() < 0.05 * U, t
+            assert np.sqrt(np.mean(err**2)) < rms_bound * U, (t, np.sqrt(np.mean(err**2)) / U)
+            assert np.abs(err).max() < max_bound * U, (t, np.abs(err).max() / U)
             moved = f["position"][plate][:, 0] - x0[plate][:, 0] - amp * np.sin(2.0 * np.pi * t / period)
             moved -= PERIOD * np.round(moved / PERIOD)
             assert np.abs(moved).max() < 1e-9
