@@ -105,8 +105,8 @@ def falling_head_deviation(times, h, length, eps, d50) -> FallingHead:
     h = np.asarray(h, dtype=float)
     ode = falling_head_level(h[0], length, eps, d50, t_end=t[-1], inertia=True)
     quasi = falling_head_level(h[0], length, eps, d50, t_end=t[-1])
-    ref = np.array([ode(ti) for ti in t])
-    ref_q = np.array([quasi(ti) for ti in t])
+    ref = np.array([ode(tk) for tk in t])
+    ref_q = np.array([quasi(tk) for tk in t])
     return FallingHead(ref, ref_q, h / ref - 1.0, h / ref_q - 1.0, ref_q >= 0.5 * h[0])
 
 
