@@ -352,11 +352,20 @@ def test_fine_permeameter_level_does_not_follow_the_shift_number(tmp_path):
     assert np.max(np.abs(devs[0.001][:n] - devs[0.0005][:n])) < 0.01, (devs[0.001][:n], devs[0.0005][:n])
 
 
-def test_coarse_permeameter_level_does_not_depend_on_the_time_step(tmp_path):
-    """The permeameter at dx 1 cm (the plug ten spacings long, six pore particles a row) with eq 31's
-    stabilisation read over the pore lattice's support (isph.ground_density_support: pore), at the
-    validation grid's dt 0.25 / 0.5 / 1 ms: the level against the falling-head ODE with inertia over the
-    first half, and the plug core's share of Dirichlet rows. Measured (one thread): -8.4 / -8.2 / -5.7 %,
+@pytest.mark.parametrize("option, spread_bound, level_bound", [
+    ("isph.ground_density_support=pore", 0.03, 0.10),
+    ("isph.ground_shifting=1.5", 0.025, 0.07)])
+def test_coarse_permeameter_level_does_not_depend_on_the_time_step(tmp_path, option, spread_bound, level_bound):
+    """The permeameter at dx 1 cm (the plug ten spacings long, six pore particles a row) with one of two
+    options, at the validation grid's dt 0.25 / 0.5 / 1 ms: the level against the falling-head ODE with
+    inertia over the first half, and the plug core's share of Dirichlet rows.
+
+    With the shift's coefficient in the ground 1.5 instead of 2 (isph.ground_shifting; docs/isph.md, "A
+    weaker shift for pore water"): measured (one thread) -5.9 / -5.2 / -4.2 %, 1.74 points apart, and
+    -3.9..-5.9 % over 0.25-1.1 ms (2.1 points). Bounds: the spread 2.5 points, the level 7 %.
+
+    With eq 31's stabilisation read over the pore lattice's support (isph.ground_density_support: pore).
+    Measured (one thread): -8.4 / -8.2 / -5.7 %,
     at one time at most 2.83 points apart (before the shift's anti-pairing took a wall pair at the pore
     water's rest distance from the wall, docs/isph.md: -7.1 / -6.7 / -7.4 %, 0.68 points; with dx moved
     by 1e-5 of itself -7.1 / -6.7 / -6.8..-7.1 %;
@@ -372,11 +381,10 @@ def test_coarse_permeameter_level_does_not_depend_on_the_time_step(tmp_path):
     test suite's threads: the sum's order decided it.
 
     Bounds: the spread 3 points (the acceptance's; the worst measured 2.83), the level 10 % (the coarse
-    plug's own error, -9.2 % at worst), the core 0.5 %."""
+    plug's own error, -9.2 % at worst), the core 0.5 % (both options)."""
     devs = {}
     for dt in (0.00025, 0.0005, 0.001):
-        t, h, frames, w, dx = _permeameter_run(tmp_path / f"pm_{dt}.h5", dt, "dx=0.01",
-                                               "isph.ground_density_support=pore")
+        t, h, frames, w, dx = _permeameter_run(tmp_path / f"pm_{dt}.h5", dt, "dx=0.01", option)
         assert dx == 0.01
         dev, half, _ = _level_deviation(t, h)
         assert half.sum() > 20
@@ -384,12 +392,12 @@ def test_coarse_permeameter_level_does_not_depend_on_the_time_step(tmp_path):
         core = [(w & f["active"] & (f["position"][:, 1] > 0.324) & (f["position"][:, 1] < 0.376)) for f in frames]
         flagged = np.mean([f["free_surface"][c].mean() for f, c in zip(frames, core) if c.any()])
         assert flagged < 0.005, (dt, flagged)
-        assert np.max(np.abs(dev[half])) < 0.10, (dt, dev[half].min(), dev[half].max())
+        assert np.max(np.abs(dev[half])) < level_bound, (dt, dev[half].min(), dev[half].max())
     n = min(len(d) for d in devs.values())
     stacked = np.array([d[:n] for d in devs.values()])
     spread = float(np.max(stacked.max(axis=0) - stacked.min(axis=0)))
-    print(f"pore support, 10 mm: spread over dt 0.25 / 0.5 / 1 ms {spread:.4f}")
-    assert spread < 0.03, spread
+    print(f"{option}, 10 mm: spread over dt 0.25 / 0.5 / 1 ms {spread:.4f}")
+    assert spread < spread_bound, spread
 
 
 @pytest.mark.parametrize("support", ["pore", "interior"])

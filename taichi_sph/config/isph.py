@@ -180,6 +180,11 @@ class ISPH(Strict):
     #: particle shifting against clustering (Fick's law, Lind et al. 2012 with Skillen et al. 2013's
     #: coefficient): dr = -A h |u| dt grad C, tangential only near the free surface; 0 disables
     shifting: NonNegFloat = 2.0
+    #: the shifting's coefficient A for water in porous ground (eps < 1); null: `shifting`. The shift
+    #: carries free water across eq 32's ramp into the ground; at A = 2 it set most of the coarse
+    #: permeameter's lead over the falling-head ODE and its dependence on dt (docs/isph.md, "A weaker
+    #: shift for pore water"). With `shifting` 0 nothing is shifted anywhere.
+    ground_shifting: NonNegFloat | None = None
     #: largest shift per step, as a fraction of dx
     shifting_max: Annotated[float, Field(gt=0, le=0.5)] = 0.1
     ppe: PPESolver = PPESolver()

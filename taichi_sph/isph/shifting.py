@@ -1,11 +1,11 @@
 """Particle shifting of mode isph, a mixin of ISPHSolver (not in the seed; docs/isph.md).
 
-dr = -A h |u| dt grad C (Lind et al. 2012), grad C = sum_j V_j (1 + 0.2 (W_ij / W_ref)^4) grad W_ij with
-its anti-pairing term, the component along the surface normal removed within the support of a free
-surface, capped at isph.shifting_max. In porous ground W_ref is taken at the pore lattice's spacing, and
-for wall pairs at pore water's rest distance from the wall; where the shift's diffusion number
-A |u| dt / h over the water in the ground exceeds SHIFT_NUMBER_MAX, the step's shift is taken in
-substeps (docs/isph.md, "Shifting in substeps").
+dr = -A h |u| dt grad C (Lind et al. 2012; A isph.shifting, isph.ground_shifting for pore water), grad C =
+sum_j V_j (1 + 0.2 (W_ij / W_ref)^4) grad W_ij with its anti-pairing term, the component along the surface
+normal removed within the support of a free surface, capped at isph.shifting_max. In porous ground W_ref is
+taken at the pore lattice's spacing, and for wall pairs at pore water's rest distance from the wall; where
+the shift's diffusion number A |u| dt / h over the water in the ground exceeds SHIFT_NUMBER_MAX, the step's
+shift is taken in substeps (docs/isph.md, "Shifting in substeps").
 """
 
 import taichi as ti
@@ -68,6 +68,16 @@ class Shifting:
         return vj * (1.0 + 0.2 * ratio**4) * gw
 
     @ti.func
+    def _shift_coefficient(self, i):
+        """The shift's A at particle i: isph.ground_shifting for water in porous ground (eps_i < 1), else
+        isph.shifting (the two are the same unless ground_shifting is given)."""
+        a = self.shift_a
+        if ti.static(self.porous and self.shift_a_ground != self.shift_a):  # noqa: SIM102 (compile-time if)
+            if self.eps[i] < 1.0:
+                a = self.shift_a_ground
+        return a
+
+    @ti.func
     def _shift(self, i, frac):
         """The shifting displacement over the fraction frac of the step dt: dr = -A h |u| frac dt grad C
         (grad C with Lind's anti-pairing term), with its component along the surface normal n = -grad C /
@@ -75,7 +85,7 @@ class Shifting:
         shifting_max."""
         u = self._advection_velocity(i)
         gc = self.grad_c[i]
-        ds = -self.shift_a * self.h * u.norm() * (frac * self.dt[None]) * gc
+        ds = -self._shift_coefficient(i) * self.h * u.norm() * (frac * self.dt[None]) * gc
         near_surface = self.free[i]
         for k in range(self.grid.nbr_count[i]):
             j = self.grid.nbr[i, k]
@@ -97,7 +107,8 @@ class Shifting:
         ti.loop_config(serialize=self.serial)
         for i in range(self.n):
             if self.solve_mask[i] == 1 and self.eps[i] < 1.0:
-                ti.atomic_max(nu, self.shift_a * self._advection_velocity(i).norm() * self.dt[None] / self.h)
+                ti.atomic_max(nu, self._shift_coefficient(i) * self._advection_velocity(i).norm() * self.dt[None]
+                              / self.h)
         return nu
 
     @ti.kernel

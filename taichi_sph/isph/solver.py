@@ -146,6 +146,8 @@ class ISPHSolver(SurfaceTests, Shifting, GroundDensity, SolverCommon):
         self.air_entry_now = ti.field(ti.i32, scene.n)
         self.shifting = sw.shifting
         self.shift_a = cfg.isph.shifting
+        #: the shift's coefficient for water in porous ground (isph.ground_shifting, else isph.shifting)
+        self.shift_a_ground = cfg.isph.shifting if cfg.isph.ground_shifting is None else cfg.isph.ground_shifting
         self.shift_max = cfg.isph.shifting_max * dx
         self.w_dx = kernels.sigma(dim, self.h) * _spline(dx / self.h)
         self.collision = sw.collisions
